@@ -1,0 +1,53 @@
+"""Similarity alignment of camera trajectories (Umeyama 1991)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from glimpse.cameras.model import PinholeCamera
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """x_target = scale * rotation @ x_source + translation."""
+
+    scale: float
+    rotation: np.ndarray  # (3, 3)
+    translation: np.ndarray  # (3,)
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """points: (N, 3) in the source frame -> (N, 3) in the target frame."""
+        return self.scale * points @ self.rotation.T + self.translation
+
+    def apply_to_camera(self, camera: PinholeCamera) -> PinholeCamera:
+        """Re-express a source-frame camera in the target frame (target units).
+
+        With x_s = R_a^T (x_t - t_a) / s, the camera x_c = R x_s + t becomes, in
+        target units, s * x_c = (R R_a^T) x_t + (s t - R R_a^T t_a).
+        """
+        R = camera.R @ self.rotation.T
+        t = self.scale * camera.t - R @ self.translation
+        return PinholeCamera(K=camera.K, R=R, t=t)
+
+
+def umeyama(source: np.ndarray, target: np.ndarray) -> Similarity:
+    """Least-squares similarity mapping source (N, 3) onto target (N, 3), N >= 3."""
+    source, target = np.asarray(source, float), np.asarray(target, float)
+    if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3 or len(source) < 3:
+        raise ValueError(f"umeyama needs two (N>=3, 3) arrays of equal shape, found {source.shape}, {target.shape}")
+    mu_s, mu_t = source.mean(0), target.mean(0)
+    xs, xt = source - mu_s, target - mu_t
+    var_s = (xs**2).sum() / len(source)
+    if var_s <= 0:
+        raise ValueError("umeyama: the source points are all identical (no baseline to align)")
+    cov = xt.T @ xs / len(source)
+    U, D, Vt = np.linalg.svd(cov)
+    S = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        S[2, 2] = -1
+    rotation = U @ S @ Vt
+    scale = float(np.trace(np.diag(D) @ S) / var_s)
+    translation = mu_t - scale * rotation @ mu_s
+    return Similarity(scale, rotation, translation)

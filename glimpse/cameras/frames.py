@@ -1,0 +1,86 @@
+"""The frames every later stage reads: chosen from frames/ or decoded from
+video.mp4, subsampled to a frame rate, undistorted, written to stage 01's
+``frames/`` (hard links when nothing changes)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from glimpse.cameras.undistort import Undistorter
+from glimpse.errors import GlimpseError
+from glimpse.io.images import frame_name, read_rgb, write_png
+from glimpse.scene import Scene
+
+
+def select_frame_ids(frame_ids: list[int], scene_fps: float, fps: float | None, max_frames: int | None) -> list[int]:
+    """Keep every k-th frame, k = round(scene_fps / fps) (all when fps is None or >= scene_fps),
+    then the first ``max_frames``. Ids are kept as they are (the video's own indices)."""
+    if fps is not None and fps <= 0:
+        raise GlimpseError(f"01_sfm.fps must be positive or null, found {fps}")
+    if max_frames is not None and max_frames < 1:
+        raise GlimpseError(f"01_sfm.max_frames must be >= 1 or null, found {max_frames}")
+    stride = 1 if fps is None else max(1, int(round(scene_fps / fps)))
+    chosen = sorted(frame_ids)[::stride]
+    return chosen if max_frames is None else chosen[:max_frames]
+
+
+def _link_or_copy(src: Path, dst: Path) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copyfile(src, dst)
+
+
+def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, out_dir: Path) -> dict[int, Path]:
+    """Materialise the chosen frames in ``out_dir`` as ``<id>.png`` (or the input's own
+    file, hard-linked, when it needs no undistortion). Returns frame id -> path."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written: dict[int, Path] = {}
+    if scene.video_path is not None:
+        wanted = set(frame_ids)
+        capture = cv2.VideoCapture(str(scene.video_path))
+        try:
+            for index in tqdm(range(max(frame_ids) + 1), desc="decoding video", unit="frame", leave=False):
+                ok, bgr = capture.read()
+                if not ok:
+                    raise GlimpseError(f"{scene.video_path}: the video ended at frame {index}, expected {max(frame_ids) + 1} frames")
+                if index in wanted:
+                    path = out_dir / f"{frame_name(index)}.png"
+                    write_png(path, undistorter.image(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)))
+                    written[index] = path
+        finally:
+            capture.release()
+        return written
+    for fid in tqdm(frame_ids, desc="frames", unit="frame", leave=False):
+        src = scene.frame_paths[fid]
+        if undistorter.active:
+            path = out_dir / f"{frame_name(fid)}.png"
+            write_png(path, undistorter.image(read_rgb(src)))
+        else:
+            path = out_dir / f"{frame_name(fid)}{src.suffix.lower()}"
+            _link_or_copy(src, path)
+        written[fid] = path
+    return written
+
+
+def frame_files(frames_dir: Path) -> dict[int, Path]:
+    """Stage 01's frames folder -> frame id -> image path."""
+    from glimpse.io.images import parse_frame_name
+
+    result = {}
+    for path in sorted(frames_dir.iterdir()):
+        fid = parse_frame_name(path.stem)
+        if fid is not None:
+            result[fid] = path
+    return result
+
+
+def grey(path: Path) -> np.ndarray:
+    """An image as (H, W) uint8 grey."""
+    return cv2.cvtColor(read_rgb(path), cv2.COLOR_RGB2GRAY)

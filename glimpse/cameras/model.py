@@ -1,0 +1,37 @@
+"""Camera records shared by every stage (OpenCV pinhole, world-to-camera)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """One frame's camera.
+
+    K: (3, 3) intrinsics; the centre of the top-left pixel is at (0, 0) (OpenCV).
+    R: (3, 3) world-to-camera rotation; t: (3,) translation: x_cam = R @ x_world + t.
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+
+    @property
+    def centre(self) -> np.ndarray:
+        """(3,) camera centre in the world frame: -R^T t."""
+        return -self.R.T @ self.t
+
+
+def default_intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
+    """(3, 3) K with the given field of view across the larger image side, centred.
+
+    The principal point is the image centre in OpenCV's convention: ((W-1)/2, (H-1)/2).
+    """
+    if not 0.0 < fov_deg < 180.0:
+        raise ValueError(f"field of view must be in (0, 180) degrees, found {fov_deg}")
+    focal = 0.5 * max(width, height) / math.tan(math.radians(fov_deg) / 2.0)
+    return np.array([[focal, 0.0, (width - 1) / 2.0], [0.0, focal, (height - 1) / 2.0], [0.0, 0.0, 1.0]])

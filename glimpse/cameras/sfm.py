@@ -1,0 +1,218 @@
+"""Structure from motion with pycolmap 4.x: SIFT on the CPU, sequential matching,
+incremental mapping with a pinhole camera; or triangulation from known poses.
+
+People are cut out of feature extraction with COLMAP masks (black = no features).
+Known intrinsics are given to COLMAP and kept fixed. COLMAP's pixel convention
+puts the top-left pixel centre at (0.5, 0.5); conversion happens here and only here.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.person_regions import PersonRegions
+from glimpse.errors import GlimpseError
+from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
+from glimpse.io.images import parse_frame_name, write_png
+
+log = logging.getLogger("glimpse")
+
+
+@dataclass(frozen=True)
+class SfmOptions:
+    """COLMAP settings (pipeline.yaml 01_sfm and compute)."""
+
+    max_features: int
+    max_image_size: int
+    sequential_overlap: int
+    min_num_matches: int
+    threads: int
+    seed: int
+
+
+@dataclass
+class SfmResult:
+    """cameras: frame id -> camera (SfM's own world frame and units, OpenCV pixels);
+    xyz (N, 3) / rgb (N, 3) uint8: sparse points; timings_s: extraction, matching, mapping."""
+
+    cameras: dict[int, PinholeCamera]
+    xyz: np.ndarray
+    rgb: np.ndarray
+    num_models: int
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def _write_colmap_masks(folder: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int]) -> None:
+    """COLMAP masks: ``<image name>.png``, 255 where features may be extracted, 0 on people."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for fid, path in frames.items():
+        allowed = ~regions.exclusion(fid, shape)
+        write_png(folder / f"{path.name}.png", allowed.astype(np.uint8) * 255)
+
+
+def _colmap_params(K: np.ndarray) -> str:
+    return ",".join(
+        f"{v:.12g}" for v in (K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET)
+    )
+
+
+def _camera_K(camera: pycolmap.Camera) -> np.ndarray:
+    fx, fy, cx, cy = camera.params
+    return np.array([[fx, 0, cx - COLMAP_PIXEL_OFFSET], [0, fy, cy - COLMAP_PIXEL_OFFSET], [0, 0, 1.0]])
+
+
+def _extract_and_match(
+    work: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int],
+    K: np.ndarray | None, options: SfmOptions, timings: dict[str, float],
+) -> Path:
+    """SIFT features (people masked) and sequential matches into ``work/database.db``."""
+    pycolmap.logging.minloglevel = pycolmap.logging.Level.WARNING.value  # COLMAP's INFO lines flood the log
+    image_dir = next(iter(frames.values())).parent
+    database = work / "database.db"
+    database.unlink(missing_ok=True)
+    mask_dir = work / "colmap_masks"
+    _write_colmap_masks(mask_dir, frames, regions, shape)
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    reader.mask_path = mask_dir
+    if K is not None:
+        reader.camera_params = _colmap_params(K)
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = options.threads
+    extraction.max_image_size = options.max_image_size
+    extraction.sift.max_num_features = options.max_features
+    log.info("SfM: extracting SIFT features from %d frames", len(frames))
+    start = time.perf_counter()
+    pycolmap.extract_features(
+        database, image_dir, image_names=[p.name for _, p in sorted(frames.items())],
+        camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader, extraction_options=extraction,
+        device=pycolmap.Device.cpu,
+    )
+    timings["extraction"] = round(time.perf_counter() - start, 3)
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = options.threads
+    pairing = pycolmap.SequentialPairingOptions()
+    pairing.overlap = options.sequential_overlap
+    pairing.num_threads = options.threads
+    log.info("SfM: sequential matching (overlap %d)", options.sequential_overlap)
+    start = time.perf_counter()
+    pycolmap.match_sequential(database, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu)
+    timings["matching"] = round(time.perf_counter() - start, 3)
+    return database
+
+
+def _pipeline_options(options: SfmOptions, fixed_intrinsics: bool) -> pycolmap.IncrementalPipelineOptions:
+    pipeline = pycolmap.IncrementalPipelineOptions()
+    pipeline.num_threads = options.threads
+    pipeline.random_seed = options.seed
+    pipeline.min_num_matches = options.min_num_matches
+    pipeline.mapper.random_seed = options.seed
+    pipeline.mapper.num_threads = options.threads
+    pipeline.triangulation.random_seed = options.seed
+    pipeline.ba_refine_principal_point = False
+    pipeline.ba_refine_extra_params = False
+    if fixed_intrinsics:
+        pipeline.ba_refine_focal_length = False
+        pipeline.mapper.abs_pose_refine_focal_length = False
+        pipeline.mapper.abs_pose_refine_extra_params = False
+    return pipeline
+
+
+def _result_from_reconstruction(rec: pycolmap.Reconstruction, num_models: int, timings: dict[str, float]) -> SfmResult:
+    cameras = {}
+    for image in rec.images.values():
+        if not image.has_pose:
+            continue
+        fid = frame_id_of(image.name)
+        pose = image.cam_from_world()
+        cameras[fid] = PinholeCamera(
+            K=_camera_K(rec.cameras[image.camera_id]),
+            R=np.asarray(pose.rotation.matrix(), dtype=np.float64),
+            t=np.asarray(pose.translation, dtype=np.float64),
+        )
+    points = list(rec.points3D.values())
+    xyz = np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3)
+    rgb = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
+    return SfmResult(cameras=cameras, xyz=xyz, rgb=rgb, num_models=num_models, timings_s=timings)
+
+
+def run_sfm(
+    work: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int],
+    K: np.ndarray | None, options: SfmOptions,
+) -> SfmResult:
+    """Estimate every frame's camera; keep the largest model. K None: focal estimated."""
+    work.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    database = _extract_and_match(work, frames, regions, shape, K, options, timings)
+    log.info("SfM: incremental mapping")
+    start = time.perf_counter()
+    models = pycolmap.incremental_mapping(database, next(iter(frames.values())).parent, work / "sparse",
+                                          _pipeline_options(options, fixed_intrinsics=K is not None))
+    timings["mapping"] = round(time.perf_counter() - start, 3)
+    if not models:
+        raise GlimpseError(
+            "structure from motion found no model: too few matches between frames "
+            "(a textureless or mostly-masked scene, or too little camera motion). "
+            "If the camera is static, set camera_motion: static in scene.yaml or PARAMS=01_sfm.mode=static"
+        )
+    largest = max(models.values(), key=lambda rec: rec.num_reg_images())
+    log.info("SfM: %d model(s); the largest registers %d of %d frames", len(models), largest.num_reg_images(), len(frames))
+    return _result_from_reconstruction(largest, len(models), timings)
+
+
+def triangulate_known_poses(
+    work: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int],
+    cameras: dict[int, PinholeCamera], options: SfmOptions,
+) -> SfmResult:
+    """Sparse points from given per-frame cameras (features and matches as run_sfm, no pose estimation)."""
+    work.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    first_K = next(iter(cameras.values())).K
+    database = _extract_and_match(work, frames, regions, shape, first_K, options, timings)
+    start = time.perf_counter()
+    db = pycolmap.Database.open(database)
+    try:
+        rec = pycolmap.Reconstruction()
+        db_cameras = db.read_all_cameras()
+        for camera in db_cameras:
+            rec.add_camera(camera)
+        for rig in db.read_all_rigs():
+            rec.add_rig(rig)
+        images = db.read_all_images()
+        image_of_frame = {image.frame_id: image for image in images}
+        for frame in db.read_all_frames():
+            cam = cameras[frame_id_of(image_of_frame[frame.frame_id].name)]
+            if not np.allclose(cam.K, first_K):
+                raise GlimpseError("triangulation from given poses needs one shared K (per-frame K is not supported)")
+            frame.rig_from_world = pycolmap.Rigid3d(np.hstack([cam.R, cam.t[:, None]]))
+            rec.add_frame(frame)
+        for image in images:
+            rec.add_image(image)
+        for frame_id in list(rec.frames):
+            rec.register_frame(frame_id)
+    finally:
+        db.close()
+    out = work / "triangulated"
+    out.mkdir(exist_ok=True)
+    rec = pycolmap.triangulate_points(rec, database, next(iter(frames.values())).parent, out,
+                                      options=_pipeline_options(options, fixed_intrinsics=True))
+    timings["triangulation"] = round(time.perf_counter() - start, 3)
+    result = _result_from_reconstruction(rec, 1, timings)
+    result.cameras = dict(cameras)  # the given cameras are the truth; only points come from COLMAP
+    return result
+
+
+def frame_id_of(image_name: str) -> int:
+    fid = parse_frame_name(Path(image_name).stem)
+    if fid is None:
+        raise GlimpseError(f"COLMAP returned an image {image_name!r} that is not a frame")
+    return fid
+
+

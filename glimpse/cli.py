@@ -1,0 +1,70 @@
+"""``python -m glimpse`` / ``glimpse``: the commands the Makefile and users call.
+
+  glimpse validate SCENE                 check a scene against glimpse-scene/1
+  glimpse prepare --scene S --out O      validate, resolve parameters, write .params/.inputs; print the run folder
+  glimpse params --scene S --stage X     print the resolved parameters one stage reads
+  glimpse run-dir --scene S --out O      print OUT/<scene name> without preparing
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from glimpse.errors import GlimpseError
+
+
+def _params_default() -> str:
+    return os.environ.get("GLIMPSE_PARAMS", "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="glimpse", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_val = sub.add_parser("validate", help="check a scene folder against glimpse-scene/1")
+    p_val.add_argument("scene", type=Path)
+    for name in ("prepare", "params", "run-dir"):
+        p = sub.add_parser(name)
+        p.add_argument("--scene", required=True, type=Path)
+        p.add_argument("--out", type=Path, default=Path("runs"))
+        p.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
+        if name == "params":
+            p.add_argument("--stage", required=True)
+    args = parser.parse_args(argv)
+    try:
+        return _dispatch(args)
+    except GlimpseError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    from glimpse.pipeline.prepare import prepare_run, scene_name
+
+    if args.command == "validate":
+        from glimpse.errors import SceneError
+        from glimpse.scene import validate_scene
+
+        if not args.scene.is_dir():
+            raise GlimpseError(f"{args.scene}: no such scene folder")
+        violations = validate_scene(args.scene)
+        if violations:
+            raise SceneError(str(args.scene), violations)
+        print(f"{args.scene}: valid glimpse-scene/1")
+        return 0
+    if args.command == "run-dir":
+        print(args.out / scene_name(args.scene))
+        return 0
+    run = prepare_run(args.scene, args.out, args.params)
+    if args.command == "prepare":
+        print(run.root)
+    else:
+        print(json.dumps(json.loads(run.params_file(args.stage).read_text())["params"], indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,203 @@
+"""Parameters: pipeline.yaml defaults, scene overrides, command-line overrides.
+
+Resolution order (later wins):
+  1. ``pipeline.yaml`` at the repository root: every parameter with its default;
+  2. the scene's ``scene.yaml`` ``overrides`` mapping;
+  3. ``PARAMS="section.key=value ..."`` on the command line (values parsed as YAML).
+
+Every override must name a known section and key; unknown ones are errors that
+list the known keys. Each stage and each shared part owns a config dataclass
+declaring its fields and types (no defaults: defaults live in pipeline.yaml only);
+``config_from_mapping`` builds it strictly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import shlex
+import types
+import typing
+from pathlib import Path
+from typing import Any, Literal, Mapping
+
+import yaml
+
+from glimpse.errors import ConfigError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+PIPELINE_YAML = REPO_ROOT / "pipeline.yaml"
+
+Params = dict[str, dict[str, Any]]  # section name -> key -> value
+
+
+def pipeline_yaml_path() -> Path:
+    """The defaults file: $GLIMPSE_PIPELINE_YAML (make PIPELINE_YAML=...) or the repository's pipeline.yaml."""
+    import os
+
+    return Path(os.environ.get("GLIMPSE_PIPELINE_YAML") or PIPELINE_YAML)
+
+
+def load_pipeline_yaml(path: Path | None = None) -> Params:
+    """Read pipeline.yaml: a mapping of section name -> mapping of parameters."""
+    path = pipeline_yaml_path() if path is None else path
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path}: cannot read the pipeline parameters: {exc}") from None
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise ConfigError(f"{path}: must be a mapping of section name -> mapping of parameters")
+    return data
+
+
+def parse_cli_params(text: str) -> list[tuple[str, Any]]:
+    """Parse ``"01_sfm.mode=sfm compute.seed=3"`` into [("01_sfm.mode", "sfm"), ...].
+
+    Values are parsed as YAML (``true``, ``1e-3``, ``[1, 2]``, ``null``); quote a
+    value that contains spaces: ``PARAMS='x.name="a b"'``.
+    """
+    items = []
+    for token in shlex.split(text or ""):
+        key, sep, raw = token.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"PARAMS: expected section.key=value, found {token!r}")
+        try:
+            value = yaml.safe_load(raw) if raw != "" else ""
+        except yaml.YAMLError:
+            value = raw
+        items.append((key.strip(), value))
+    return items
+
+
+def _known(mapping: Mapping[str, Any]) -> str:
+    return ", ".join(sorted(mapping)) or "(none)"
+
+
+def apply_override(params: Params, dotted_key: str, value: Any, source: str) -> None:
+    """Set ``section.key[.subkey]`` in ``params`` in place; unknown names are errors."""
+    section, _, rest = dotted_key.partition(".")
+    if section not in params:
+        raise ConfigError(f"{source}: unknown section {section!r} in {dotted_key!r}; known sections: {_known(params)}")
+    if not rest:
+        raise ConfigError(f"{source}: {dotted_key!r} names a section, not a parameter; use {section}.<key>=value")
+    node = params[section]
+    parts = rest.split(".")
+    for depth, part in enumerate(parts):
+        if not isinstance(node, dict) or part not in node:
+            where = ".".join([section, *parts[:depth]])
+            known = _known(node) if isinstance(node, dict) else "(not a mapping)"
+            raise ConfigError(f"{source}: unknown parameter {dotted_key!r}; known keys of {where}: {known}")
+        if depth == len(parts) - 1:
+            node[part] = value
+        else:
+            node = node[part]
+
+
+def _flatten(mapping: Mapping[str, Any], prefix: str) -> list[tuple[str, Any]]:
+    items = []
+    for key, value in mapping.items():
+        if isinstance(value, dict) and value:
+            items += _flatten(value, f"{prefix}.{key}")
+        else:
+            items.append((f"{prefix}.{key}", value))
+    return items
+
+
+def resolve_params(
+    defaults: Params,
+    scene_overrides: Mapping[str, Any] | None,
+    cli_params: list[tuple[str, Any]],
+    scene_yaml_name: str = "scene.yaml",
+) -> Params:
+    """Merge defaults < scene overrides < command line; return a new mapping."""
+    import copy
+
+    params = copy.deepcopy(defaults)
+    for section, values in (scene_overrides or {}).items():
+        if not isinstance(values, dict):
+            raise ConfigError(f"{scene_yaml_name}: overrides.{section} must be a mapping of parameters")
+        if section not in params:
+            raise ConfigError(
+                f"{scene_yaml_name}: overrides names unknown section {section!r}; known sections: {_known(params)}"
+            )
+        for dotted, value in _flatten(values, section):
+            apply_override(params, dotted, value, f"{scene_yaml_name} overrides")
+    for dotted, value in cli_params:
+        apply_override(params, dotted, value, "PARAMS")
+    return params
+
+
+# --------------------------------------------------------------------------- typed configs
+
+
+def _type_name(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        return " | ".join(repr(a) for a in typing.get_args(tp))
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(_type_name(a) for a in typing.get_args(tp))
+    if tp is type(None):
+        return "null"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _check_value(value: Any, tp: Any) -> bool:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        return value in typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return any(_check_value(value, a) for a in typing.get_args(tp))
+    if tp is type(None):
+        return value is None
+    if tp is bool:
+        return isinstance(value, bool)
+    if tp is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if tp is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if tp is str:
+        return isinstance(value, str)
+    if origin is list:
+        (item_tp,) = typing.get_args(tp)
+        return isinstance(value, list) and all(_check_value(v, item_tp) for v in value)
+    if origin is dict or tp is dict:
+        return isinstance(value, dict)
+    raise TypeError(f"unsupported config field type {tp!r}")
+
+
+T = typing.TypeVar("T")
+
+
+def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) -> T:
+    """Build the config dataclass ``cls`` from ``mapping``, strictly.
+
+    Unknown keys, missing keys and values of the wrong type are ConfigErrors that
+    name ``where`` (e.g. ``pipeline.yaml 01_sfm``) and the known keys. Fields that
+    are themselves config dataclasses are built recursively. Float fields accept
+    integers (converted).
+    """
+    if not isinstance(mapping, Mapping):
+        raise ConfigError(f"{where}: must be a mapping, found {type(mapping).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(mapping) - fields)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known keys: {', '.join(sorted(fields))}")
+    missing = sorted(fields - set(mapping))
+    if missing:
+        raise ConfigError(f"{where}: missing key(s) {', '.join(missing)} (every parameter needs an entry in pipeline.yaml)")
+    values = {}
+    for name in sorted(fields):
+        tp, value = hints[name], mapping[name]
+        if dataclasses.is_dataclass(tp):
+            values[name] = config_from_mapping(tp, value, f"{where}.{name}")
+            continue
+        if not _check_value(value, tp):
+            raise ConfigError(f"{where}.{name}: expected {_type_name(tp)}, found {value!r}")
+        values[name] = float(value) if tp is float else value
+    return cls(**values)
+
+
+def config_to_mapping(config: Any) -> dict[str, Any]:
+    """The inverse of config_from_mapping (for manifests and .params files)."""
+    return dataclasses.asdict(config)

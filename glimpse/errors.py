@@ -1,0 +1,47 @@
+"""User-facing errors: printed as one clear message, never as a traceback."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class GlimpseError(Exception):
+    """Bad input or a stage that cannot run; the message says what to fix."""
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One broken rule of an input file.
+
+    file:  path of the offending file or folder, relative to the scene root
+           (e.g. ``cameras.json``, ``humans/p0/masks/000003.png``).
+    rule:  the rule, stated as it should hold (e.g. ``R must be a rotation``).
+    found: what was found instead (e.g. ``det(R) = -1.0``).
+    """
+
+    file: str
+    rule: str
+    found: str
+
+    def __str__(self) -> str:
+        return f"{self.file}: {self.rule}; found {self.found}"
+
+
+class SceneError(GlimpseError):
+    """A scene folder breaks the glimpse-scene/1 contract; lists every violation."""
+
+    def __init__(self, scene_root: str, violations: list[Violation]):
+        self.scene_root = scene_root
+        self.violations = list(violations)
+        lines = [f"scene {scene_root} breaks glimpse-scene/1 ({len(self.violations)} problem(s)):"]
+        lines += [f"  - {v}" for v in self.violations]
+        lines.append("  (see docs/SCENE_FORMAT.md)")
+        super().__init__("\n".join(lines))
+
+
+class ConfigError(GlimpseError):
+    """A parameter is unknown, mistyped or out of range."""
+
+
+class NotImplementedStageError(GlimpseError):
+    """A pipeline stage whose issue has not landed yet."""

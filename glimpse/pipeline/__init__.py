@@ -1,0 +1,1 @@
+"""The pipeline frame: stage registry, parameter files, artifacts and stage runs."""

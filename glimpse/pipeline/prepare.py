@@ -1,0 +1,211 @@
+"""Before any stage runs: validate the scene, resolve parameters, and write the
+per-stage files the Makefile depends on.
+
+For each stage, under ``OUT/<scene>/``:
+  ``.params/<stage>.json``  its resolved parameters (own section + shared sections it reads)
+  ``.inputs/<stage>.json``  content hashes of the scene files it reads
+Both are rewritten only when their content changes, so make reruns exactly the
+stages whose parameters or inputs changed, and their descendants.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from glimpse.config import Params, load_pipeline_yaml, parse_cli_params, resolve_params
+from glimpse.errors import SceneError
+from glimpse.pipeline.stages import STAGES, StageSpec
+
+PARAMS_FORMAT = "glimpse-params/1"
+INPUTS_FORMAT = "glimpse-inputs/1"
+VALIDATION_CACHE_FORMAT = "glimpse-validation-cache/1"
+HASH_CACHE_FORMAT = "glimpse-hash-cache/1"
+
+
+@dataclass(frozen=True)
+class RunPaths:
+    """Where one scene's run lives: ``OUT/<scene name>/``."""
+
+    root: Path
+
+    def stage_dir(self, stage: str) -> Path:
+        return self.root / stage
+
+    def manifest(self, stage: str) -> Path:
+        return self.root / stage / "manifest.json"
+
+    def params_file(self, stage: str) -> Path:
+        return self.root / ".params" / f"{stage}.json"
+
+    def inputs_file(self, stage: str) -> Path:
+        return self.root / ".inputs" / f"{stage}.json"
+
+    def work_dir(self, stage: str) -> Path:
+        return self.root / ".work" / stage
+
+    @property
+    def cache_dir(self) -> Path:
+        return self.root / ".cache"
+
+
+def write_if_changed(path: Path, text: str) -> bool:
+    """Write ``text`` to ``path`` atomically unless it already holds exactly that."""
+    if path.exists() and path.read_text() == text:
+        return False
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return True
+
+
+def canonical_json(data: Any) -> str:
+    return json.dumps(data, indent=2, sort_keys=True) + "\n"
+
+
+def _scene_files(scene_root: Path) -> list[str]:
+    """Every file under the scene, as sorted POSIX paths relative to the root."""
+    files = []
+    for dirpath, dirnames, filenames in os.walk(scene_root):
+        dirnames.sort()
+        rel = Path(dirpath).relative_to(scene_root)
+        files += [(rel / f).as_posix() for f in filenames]
+    return sorted(files)
+
+
+def _stat_key(path: Path) -> list[int]:
+    st = path.stat()
+    return [st.st_size, st.st_mtime_ns]
+
+
+def _code_hash(folder: Path) -> str:
+    digest = hashlib.sha256()
+    for path in sorted(folder.rglob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def validate_cached(scene_root: Path, cache_dir: Path) -> None:
+    """Validate the scene unless an identical scene (same files, sizes, mtimes)
+    already passed with the same validator code; raise SceneError otherwise."""
+    from glimpse.scene import validate_scene
+
+    scene_root = scene_root.resolve()
+    fingerprint = hashlib.sha256()
+    fingerprint.update(_code_hash(Path(__file__).resolve().parent.parent / "scene").encode())
+    for rel in _scene_files(scene_root):
+        fingerprint.update(f"{rel}:{_stat_key(scene_root / rel)}\n".encode())
+    key = hashlib.sha1(str(scene_root).encode()).hexdigest()[:16]
+    cache = cache_dir / f"validation-{key}.json"
+    expected = {"format": VALIDATION_CACHE_FORMAT, "scene": str(scene_root), "fingerprint": fingerprint.hexdigest()}
+    if cache.exists():
+        try:
+            if json.loads(cache.read_text()) == expected:
+                return
+        except json.JSONDecodeError:
+            pass
+    violations = validate_scene(scene_root)
+    if violations:
+        raise SceneError(str(scene_root), violations)
+    write_if_changed(cache, canonical_json(expected))
+
+
+class HashCache:
+    """sha256 of scene files, remembered by (size, mtime) so unchanged files are not reread."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.entries: dict[str, Any] = {}
+        if path.exists():
+            try:
+                data = json.loads(path.read_text())
+                if data.get("format") == HASH_CACHE_FORMAT:
+                    self.entries = data["entries"]
+            except (json.JSONDecodeError, KeyError):
+                self.entries = {}
+
+    def sha256(self, path: Path) -> str:
+        key, stat = str(path.resolve()), _stat_key(path)
+        entry = self.entries.get(key)
+        if entry and entry[0] == stat:
+            return entry[1]
+        digest = hashlib.sha256()
+        with path.open("rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        self.entries[key] = [stat, digest.hexdigest()]
+        return digest.hexdigest()
+
+    def save(self) -> None:
+        write_if_changed(self.path, json.dumps({"format": HASH_CACHE_FORMAT, "entries": self.entries}, sort_keys=True))
+
+
+def scene_input_hashes(scene_root: Path, spec: StageSpec, hashes: HashCache) -> dict[str, str]:
+    """Content hashes of the scene files ``spec`` reads (scene.yaml without ``overrides``)."""
+    result = {}
+    for rel in _scene_files(scene_root):
+        if not any(fnmatch.fnmatch(rel, pattern) for pattern in spec.scene_inputs):
+            continue
+        if rel == "scene.yaml":
+            content = yaml.safe_load((scene_root / rel).read_text()) or {}
+            content.pop("overrides", None)
+            result[rel] = hashlib.sha256(canonical_json(content).encode()).hexdigest()
+        else:
+            result[rel] = hashes.sha256(scene_root / rel)
+    return result
+
+
+def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
+    """The parameters one stage reads: its own section plus the shared ones."""
+    sections = {name: params[name] for name in spec.shared}
+    sections[spec.name] = params.get(spec.name, {})
+    return sections
+
+
+def scene_name(scene_root: Path) -> str:
+    """The ``name`` from scene.yaml (the scene has been validated)."""
+    return str(yaml.safe_load((scene_root / "scene.yaml").read_text())["name"])
+
+
+def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> RunPaths:
+    """Validate, resolve and write the .params/.inputs files of every stage.
+
+    Returns the run's paths. Raises SceneError or ConfigError on bad input, before
+    anything under ``out_root`` is touched except the validation cache.
+    """
+    scene_root = Path(scene_root)
+    if not (scene_root / "scene.yaml").is_file():
+        from glimpse.errors import Violation
+
+        raise SceneError(str(scene_root), [Violation("scene.yaml", "the scene folder must contain scene.yaml", "no such file")])
+    validate_cached(scene_root, Path(out_root) / ".cache")
+    overrides = (yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}).get("overrides") or {}
+    params = resolve_params(load_pipeline_yaml(), overrides, parse_cli_params(cli_params), str(scene_root / "scene.yaml"))
+    run = RunPaths(Path(out_root) / scene_name(scene_root))
+    hashes = HashCache(run.cache_dir / "hashes.json")
+    for spec in STAGES:
+        write_if_changed(
+            run.params_file(spec.name),
+            canonical_json({"format": PARAMS_FORMAT, "stage": spec.name, "params": stage_params(params, spec)}),
+        )
+        write_if_changed(
+            run.inputs_file(spec.name),
+            canonical_json(
+                {
+                    "format": INPUTS_FORMAT,
+                    "stage": spec.name,
+                    "scene": str(scene_root.resolve()),
+                    "files": scene_input_hashes(scene_root, spec, hashes),
+                }
+            ),
+        )
+    hashes.save()
+    return run

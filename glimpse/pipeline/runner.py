@@ -1,0 +1,196 @@
+"""Running one stage: parse arguments, load inputs, call the stage body, publish
+its outputs atomically with a manifest.
+
+A stage writes every file into ``OUT/<scene>/.tmp/<stage>-<pid>/``. Only when the
+body returns without error is ``manifest.json`` written there (last), and the
+folder swapped into ``OUT/<scene>/<stage>/``; the previous output survives any
+failure or interruption untouched. Work in progress that should survive a crash
+(checkpoints) goes to ``OUT/<scene>/.work/<stage>/``, removed after success.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import shutil
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from glimpse import __version__
+from glimpse.errors import GlimpseError, NotImplementedStageError
+from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, prepare_run
+from glimpse.pipeline.stages import STAGE_NAMES, stage_spec
+
+MANIFEST_FORMAT = "glimpse-manifest/1"
+log = logging.getLogger("glimpse")
+
+
+@dataclass
+class StageContext:
+    """Everything a stage body needs.
+
+    out:       the temporary output folder to write into (becomes OUT/<scene>/<stage>/).
+    work:      OUT/<scene>/.work/<stage>/ for checkpoints that survive a crash.
+    params:    resolved parameters: own section under the stage name, plus shared sections.
+    formats:   file (relative to ``out``) -> format version; recorded in the manifest.
+    timings:   named durations in seconds; recorded in the manifest.
+    summary:   small facts for the manifest (mode chosen, counts, errors).
+    """
+
+    stage: str
+    scene_root: Path
+    run: RunPaths
+    out: Path
+    work: Path
+    params: dict[str, Any]
+    formats: dict[str, str] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def upstream_dir(self, stage: str) -> Path:
+        """The published output folder of an upstream stage."""
+        path = self.run.stage_dir(stage)
+        if not (path / "manifest.json").is_file():
+            raise GlimpseError(f"stage {self.stage} needs {stage}'s output in {path}; run `make {stage} SCENE=...` first")
+        return path
+
+    @contextmanager
+    def timed(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.timings[name] = round(self.timings.get(name, 0.0) + time.perf_counter() - start, 4)
+
+
+def code_version() -> str:
+    """glimpse version plus the git commit (``+dirty`` with uncommitted changes)."""
+    root = Path(__file__).resolve().parent.parent.parent
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, timeout=10,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    if not commit:
+        return __version__
+    return f"{__version__}+{commit}{'.dirty' if dirty else ''}"
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _recover_interrupted_swap(final: Path) -> None:
+    """If a previous run died between its two renames, put the old output back."""
+    for old in final.parent.glob(f".{final.name}.old-*"):
+        if not final.exists():
+            os.replace(old, final)
+        else:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def publish(tmp: Path, final: Path) -> None:
+    """Replace ``final`` by ``tmp``: rename the old folder aside, rename the new in, delete the old."""
+    _recover_interrupted_swap(final)
+    old = final.parent / f".{final.name}.old-{os.getpid()}"
+    if final.exists():
+        os.replace(final, old)
+    os.replace(tmp, final)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _manifest(ctx: StageContext, started: float, upstream: list[str]) -> dict[str, Any]:
+    inputs = json.loads(ctx.run.inputs_file(ctx.stage).read_text())
+    return {
+        "format": MANIFEST_FORMAT,
+        "stage": ctx.stage,
+        "scene": str(ctx.scene_root.resolve()),
+        "code_version": code_version(),
+        "formats": dict(sorted(ctx.formats.items())),
+        "params": ctx.params,
+        "inputs": {
+            "upstream_manifests": {s: _sha256(ctx.run.manifest(s)) for s in upstream},
+            "scene_files": inputs["files"],
+        },
+        "timings_s": dict(ctx.timings, total=round(time.time() - started, 4)),
+        "summary": ctx.summary,
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]) -> Path:
+    """Prepare, run ``body`` in a temporary folder, publish; return the output folder."""
+    spec = stage_spec(stage)
+    run = prepare_run(scene_root, out_root, cli_params)
+    params_doc = json.loads(run.params_file(stage).read_text())
+    if params_doc.get("format") != PARAMS_FORMAT:
+        raise GlimpseError(f"{run.params_file(stage)}: unknown format {params_doc.get('format')!r}; expected {PARAMS_FORMAT}")
+    for up in spec.upstream:
+        if not run.manifest(up).is_file():
+            raise GlimpseError(f"stage {stage} needs {up} first: run `make {stage} SCENE={scene_root}` to build it")
+    tmp_root = run.root / ".tmp"
+    tmp_root.mkdir(parents=True, exist_ok=True)
+    for stale in tmp_root.glob(f"{stage}-*"):  # leftovers of killed runs
+        shutil.rmtree(stale, ignore_errors=True)
+    tmp = tmp_root / f"{stage}-{os.getpid()}"
+    tmp.mkdir()
+    ctx = StageContext(
+        stage=stage, scene_root=Path(scene_root), run=run, out=tmp, work=run.work_dir(stage), params=params_doc["params"]
+    )
+    started = time.time()
+    try:
+        body(ctx)
+        manifest = _manifest(ctx, started, list(spec.upstream))
+        (tmp / "manifest.json").write_text(canonical_json(manifest))
+        publish(tmp, run.stage_dir(stage))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    shutil.rmtree(ctx.work, ignore_errors=True)
+    return run.stage_dir(stage)
+
+
+def stage_main(stage: str, body: Callable[[StageContext], None] | None, description: str) -> None:
+    """Command-line entry point of ``stages/<stage>/run.py``.
+
+    ``body`` None means the stage's issue has not landed: a clear error, no output.
+    Bad input exits with status 2 and one message; bugs keep their traceback.
+    """
+    parser = argparse.ArgumentParser(prog=f"stages/{stage}/run.py", description=description)
+    parser.add_argument("--scene", required=True, type=Path, help="scene folder (glimpse-scene/1)")
+    parser.add_argument("--out", type=Path, default=Path("runs"), help="output root (default runs/)")
+    parser.add_argument(
+        "--params", default=os.environ.get("GLIMPSE_PARAMS", ""),
+        help='overrides, e.g. "01_sfm.mode=sfm compute.seed=1" (default: $GLIMPSE_PARAMS, set by make PARAMS=...)',
+    )
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(message)s")
+    try:
+        if body is None:
+            run = prepare_run(args.scene, args.out, args.params)
+            done = [name for name in STAGE_NAMES if run.manifest(name).is_file()]
+            raise NotImplementedStageError(
+                f"stage {stage} is not implemented yet (it arrives with issue {stage_spec(stage).issue}); "
+                f"the pipeline stops here. Finished stages ({', '.join(done) or 'none'}) are in {run.root}/"
+            )
+        final = run_stage(stage, args.scene, args.out, args.params, body)
+    except GlimpseError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    log.info("done: %s", final)
+
+
+__all__ = ["StageContext", "run_stage", "stage_main", "publish", "STAGE_NAMES", "MANIFEST_FORMAT"]

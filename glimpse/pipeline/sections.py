@@ -1,0 +1,12 @@
+"""Which config dataclass owns each pipeline.yaml section (tests check both ways:
+every field has an entry, every entry a field)."""
+
+from __future__ import annotations
+
+from glimpse.cameras.config import CamerasConfig
+from glimpse.compute import ComputeConfig
+
+SECTION_CONFIGS: dict[str, type] = {
+    "compute": ComputeConfig,
+    "01_sfm": CamerasConfig,
+}
