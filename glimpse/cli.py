@@ -58,6 +58,13 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "run-dir":
         print(args.out / scene_name(args.scene))
         return 0
+    if args.command == "params":
+        from glimpse.pipeline.stages import stage_spec
+
+        try:
+            stage_spec(args.stage)
+        except ValueError as exc:
+            raise GlimpseError(str(exc)) from None
     run = prepare_run(args.scene, args.out, args.params)
     if args.command == "prepare":
         print(run.root)

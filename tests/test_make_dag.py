@@ -117,6 +117,13 @@ def test_reruns_exactly_the_changed_stage_and_its_descendants(setup):
     make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
     assert sorted(ran(log, n)) == ["05_textual_inversion", "06_joint_opt", "07_eval"]
 
+    n = len(ran(log, 0))  # clean-stage removes one output; make all rebuilds it and its descendants
+    cleaned = make(args, env, "STAGE=05_textual_inversion", target="clean-stage")
+    assert cleaned.returncode == 0 and not (out / "tiny" / "05_textual_inversion").exists()
+    assert (out / "tiny" / "04_bg_pretrain" / "manifest.json").exists()
+    make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
+    assert sorted(ran(log, n)) == ["05_textual_inversion", "06_joint_opt", "07_eval"]
+
     n = len(ran(log, 0))  # one stage on request; its descendants wait for `make all`
     single = make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5", target="03_masks")
     assert single.returncode == 0, single.stderr

@@ -24,3 +24,4 @@ class CamerasConfig:
     sequential_overlap: int
     min_num_matches: int
     min_registered_fraction: float
+    deterministic: bool

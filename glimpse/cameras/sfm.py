@@ -1,5 +1,6 @@
 """Structure from motion with pycolmap 4.x: SIFT on the CPU, sequential matching,
-incremental mapping with a pinhole camera; or triangulation from known poses.
+incremental mapping with a pinhole camera (PINHOLE with K fixed when known, else
+SIMPLE_PINHOLE with its focal length estimated); or triangulation from known poses.
 
 People are cut out of feature extraction with COLMAP masks (black = no features).
 Known intrinsics are given to COLMAP and kept fixed. COLMAP's pixel convention
@@ -35,6 +36,7 @@ class SfmOptions:
     min_num_matches: int
     threads: int
     seed: int
+    deterministic: bool  # COLMAP on one thread, so reruns give identical files
 
 
 @dataclass
@@ -64,7 +66,14 @@ def _colmap_params(K: np.ndarray) -> str:
 
 
 def _camera_K(camera: pycolmap.Camera) -> np.ndarray:
-    fx, fy, cx, cy = camera.params
+    """(3, 3) OpenCV K of a COLMAP PINHOLE or SIMPLE_PINHOLE camera."""
+    if camera.model_name == "SIMPLE_PINHOLE":
+        f, cx, cy = camera.params
+        fx = fy = f
+    elif camera.model_name == "PINHOLE":
+        fx, fy, cx, cy = camera.params
+    else:
+        raise GlimpseError(f"COLMAP returned a {camera.model_name} camera; expected a pinhole model")
     return np.array([[fx, 0, cx - COLMAP_PIXEL_OFFSET], [0, fy, cy - COLMAP_PIXEL_OFFSET], [0, 0, 1.0]])
 
 
@@ -80,12 +89,14 @@ def _extract_and_match(
     mask_dir = work / "colmap_masks"
     _write_colmap_masks(mask_dir, frames, regions, shape)
     reader = pycolmap.ImageReaderOptions()
-    reader.camera_model = "PINHOLE"
     reader.mask_path = mask_dir
-    if K is not None:
+    if K is not None:  # known intrinsics, kept fixed
+        reader.camera_model = "PINHOLE"
         reader.camera_params = _colmap_params(K)
+    else:  # square pixels, principal point at the centre: one focal length to estimate
+        reader.camera_model = "SIMPLE_PINHOLE"
     extraction = pycolmap.FeatureExtractionOptions()
-    extraction.num_threads = options.threads
+    extraction.num_threads = _colmap_threads(options)  # image ids follow completion order
     extraction.max_image_size = options.max_image_size
     extraction.sift.max_num_features = options.max_features
     log.info("SfM: extracting SIFT features from %d frames", len(frames))
@@ -97,10 +108,10 @@ def _extract_and_match(
     )
     timings["extraction"] = round(time.perf_counter() - start, 3)
     matching = pycolmap.FeatureMatchingOptions()
-    matching.num_threads = options.threads
+    matching.num_threads = _colmap_threads(options)
     pairing = pycolmap.SequentialPairingOptions()
     pairing.overlap = options.sequential_overlap
-    pairing.num_threads = options.threads
+    pairing.num_threads = _colmap_threads(options)
     log.info("SfM: sequential matching (overlap %d)", options.sequential_overlap)
     start = time.perf_counter()
     pycolmap.match_sequential(database, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu)
@@ -108,13 +119,20 @@ def _extract_and_match(
     return database
 
 
+def _colmap_threads(options: SfmOptions) -> int:
+    """COLMAP threads. Every step's result depends on thread scheduling: extraction numbers the
+    images in completion order, verification draws RANSAC samples per thread, bundle
+    adjustment sums in varying order. Deterministic runs use one thread."""
+    return 1 if options.deterministic else options.threads
+
+
 def _pipeline_options(options: SfmOptions, fixed_intrinsics: bool) -> pycolmap.IncrementalPipelineOptions:
     pipeline = pycolmap.IncrementalPipelineOptions()
-    pipeline.num_threads = options.threads
+    pipeline.num_threads = _colmap_threads(options)
     pipeline.random_seed = options.seed
     pipeline.min_num_matches = options.min_num_matches
     pipeline.mapper.random_seed = options.seed
-    pipeline.mapper.num_threads = options.threads
+    pipeline.mapper.num_threads = _colmap_threads(options)
     pipeline.triangulation.random_seed = options.seed
     pipeline.ba_refine_principal_point = False
     pipeline.ba_refine_extra_params = False

@@ -71,10 +71,12 @@ def _given_poses(scene: Scene) -> dict[int, PinholeCamera]:
     }
 
 
-def _is_static(cameras: dict[int, PinholeCamera], tolerance: float) -> bool:
+def _is_static(cameras: dict[int, PinholeCamera], tolerance_m: float) -> bool:
+    """True when every camera centre lies within ``tolerance_m`` of the others and all
+    rotations agree to the same tolerance (on a unit sphere: radians)."""
     centres = np.array([c.centre for c in cameras.values()])
     rotations = np.array([c.R for c in cameras.values()])
-    return bool(np.ptp(centres, axis=0).max() <= tolerance and np.ptp(rotations, axis=0).max() <= 1e-9)
+    return bool(np.ptp(centres, axis=0).max() <= tolerance_m and np.ptp(rotations, axis=0).max() <= tolerance_m)
 
 
 def choose_mode(scene: Scene, config: CamerasConfig) -> tuple[str, str]:
@@ -96,7 +98,7 @@ def _sfm_options(config: CamerasConfig, threads: int, seed: int) -> SfmOptions:
     return SfmOptions(
         max_features=config.sift_max_features, max_image_size=config.sift_max_image_size,
         sequential_overlap=config.sequential_overlap, min_num_matches=config.min_num_matches,
-        threads=threads, seed=seed,
+        threads=threads, seed=seed, deterministic=config.deterministic,
     )
 
 
