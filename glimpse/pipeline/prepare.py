@@ -20,7 +20,8 @@ from typing import Any
 
 import yaml
 
-from glimpse.config import Params, load_pipeline_yaml, parse_cli_params, resolve_params
+from glimpse.body.config import BodyConfig, check_scene_body_model
+from glimpse.config import Params, config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params
 from glimpse.errors import SceneError
 from glimpse.pipeline.stages import STAGES, StageSpec
 
@@ -187,8 +188,12 @@ def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> RunPa
 
         raise SceneError(str(scene_root), [Violation("scene.yaml", "the scene folder must contain scene.yaml", "no such file")])
     validate_cached(scene_root, Path(out_root) / ".cache")
-    overrides = (yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}).get("overrides") or {}
-    params = resolve_params(load_pipeline_yaml(), overrides, parse_cli_params(cli_params), str(scene_root / "scene.yaml"))
+    scene_yaml = yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}
+    params = resolve_params(load_pipeline_yaml(), scene_yaml.get("overrides") or {}, parse_cli_params(cli_params),
+                            str(scene_root / "scene.yaml"))
+    if any(scene_root.glob("humans/*/smpl.npz")):
+        body = config_from_mapping(BodyConfig, params["body"], "body")
+        check_scene_body_model(scene_yaml.get("body_model", "free"), body, str(scene_root / "scene.yaml"))
     run = RunPaths(Path(out_root) / scene_name(scene_root))
     hashes = HashCache(run.cache_dir / "hashes.json")
     for spec in STAGES:

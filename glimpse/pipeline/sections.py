@@ -3,10 +3,12 @@ every field has an entry, every entry a field)."""
 
 from __future__ import annotations
 
+from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
 
 SECTION_CONFIGS: dict[str, type] = {
     "compute": ComputeConfig,
+    "body": BodyConfig,
     "01_sfm": CamerasConfig,
 }

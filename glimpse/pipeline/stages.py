@@ -44,14 +44,14 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "02_smpl_fit",
         upstream=("01_sfm",),
-        shared=("compute",),
+        shared=("compute", "body"),
         scene_inputs=("scene.yaml", *_PERSON_2D, *_PERSON_3D),
         issue="#7 (stage 02: fit the body to each person)",
     ),
     StageSpec(
         "03_masks",
         upstream=("01_sfm", "02_smpl_fit"),
-        shared=("compute",),
+        shared=("compute", "body"),
         scene_inputs=("humans/*/masks/*.png",),
         issue="#8 (stage 03 masks and stage 04 background)",
     ),
@@ -65,28 +65,28 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "05_textual_inversion",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute",),
+        shared=("compute", "body"),
         scene_inputs=("humans/*/reference/*",),
         issue="#9 (stage 05 crops, stage 06 joint optimisation, stage 07 metrics)",
     ),
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute",),
+        shared=("compute", "body"),
         scene_inputs=(),
         issue="#9 (stage 05 crops, stage 06 joint optimisation, stage 07 metrics)",
     ),
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "06_joint_opt"),
-        shared=("compute",),
+        shared=("compute", "body"),
         scene_inputs=("eval/**/*",),
         issue="#9 (stage 07 metrics) and #11 (renders, edits, exports)",
     ),
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute",)
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body")
 
 
 def stage_spec(name: str) -> StageSpec:
