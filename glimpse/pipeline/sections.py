@@ -6,9 +6,11 @@ from __future__ import annotations
 from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
+from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
     "compute": ComputeConfig,
     "body": BodyConfig,
+    "render": RenderConfig,
     "01_sfm": CamerasConfig,
 }

@@ -58,7 +58,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "04_bg_pretrain",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute",),
+        shared=("compute", "render"),
         scene_inputs=(),
         issue="#8 (stage 03 masks and stage 04 background)",
     ),
@@ -72,21 +72,21 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute", "body"),
+        shared=("compute", "body", "render"),
         scene_inputs=(),
         issue="#9 (stage 05 crops, stage 06 joint optimisation, stage 07 metrics)",
     ),
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "06_joint_opt"),
-        shared=("compute", "body"),
+        shared=("compute", "body", "render"),
         scene_inputs=("eval/**/*",),
         issue="#9 (stage 07 metrics) and #11 (renders, edits, exports)",
     ),
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body")
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render")
 
 
 def stage_spec(name: str) -> StageSpec:

@@ -1,0 +1,7 @@
+"""Differentiable Gaussian splatting: `rasterize(camera, means=..., ...)` over three backends
+(cpu: C++ kernel; torch: pure-PyTorch reference; gsplat: CUDA). See rasterize.py."""
+
+from glimpse.render.projection import Camera
+from glimpse.render.rasterize import RenderOutput, rasterize
+
+__all__ = ["Camera", "RenderOutput", "rasterize"]

@@ -1,0 +1,202 @@
+"""The rasterizer: the C++ cpu backend against the pure-PyTorch reference, the reference
+against finite differences and closed forms, tile binning against no binning, and the
+pixel convention. gsplat (CUDA) is compared when a GPU is present."""
+
+import math
+
+import pytest
+import torch
+
+from glimpse.render import Camera, rasterize
+from glimpse.render.binning import bin_gaussians
+from glimpse.render.composite_cpu import available as cpu_available
+from glimpse.render.composite_torch import composite_dense, composite_torch
+from glimpse.render.projection import LOW_PASS, project_gaussians, quat_scale_to_covariance
+from glimpse.render.sh import C0
+
+needs_cpu_kernel = pytest.mark.skipif(not cpu_available(), reason="the C++ kernel does not build here")
+needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+IMAGE_ATOL = 1e-5
+GRAD_REL, GRAD_COS = 1e-4, 0.9999
+
+
+def camera(width=64, height=48, focal=55.0, dtype=torch.float32) -> Camera:
+    K = torch.tensor([[focal, 0, (width - 1) / 2], [0, focal, (height - 1) / 2], [0, 0, 1]], dtype=dtype)
+    return Camera(K, torch.eye(3, dtype=dtype), torch.zeros(3, dtype=dtype), width, height)
+
+
+def scene(kind: str, n: int = 400, seed: int = 0) -> dict:
+    """Random Gaussians in front of the camera, plus the hard cases of `kind`."""
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g) * torch.tensor([1.0, 0.8, 0.6]) + torch.tensor([0.0, 0.0, 4.0])
+    params = {
+        "means": means, "quats": torch.randn(n, 4, generator=g),
+        "scales": torch.rand(n, 3, generator=g) * 0.12 + 0.01,
+        "opacities": torch.rand(n, generator=g) * 0.9 + 0.05, "colors": torch.rand(n, 3, generator=g),
+    }
+    if kind == "behind":  # a third behind the camera or closer than the near plane
+        params["means"][: n // 3, 2] = -params["means"][: n // 3, 2].abs() + 0.005
+    elif kind == "border":  # straddling the image border and far outside it
+        params["means"][: n // 2, 0] = 4.0 * 0.58 * torch.sign(params["means"][: n // 2, 0])
+        params["means"][n // 2: n // 2 + 20, 1] = 30.0
+    elif kind == "degenerate":  # needle- and disc-like, tiny and huge
+        params["scales"][: n // 4, :2] = 1e-5
+        params["scales"][n // 4: n // 2, 2] = 1e-6
+        params["scales"][n // 2: n // 2 + 10] = 2.0
+        params["opacities"][-20:] = 0.9999
+    return params
+
+
+def render_with_grads(backend: str, params: dict, cam: Camera, covariance_input: bool = False, **kw):
+    leaves = {k: v.clone().requires_grad_(True) for k, v in params.items()}
+    geometry = ({"covariances": quat_scale_to_covariance(leaves["quats"], leaves["scales"])} if covariance_input
+                else {"quats": leaves["quats"], "scales": leaves["scales"]})
+    groups = torch.arange(len(params["means"])) % 3
+    out = rasterize(cam, means=leaves["means"], opacities=leaves["opacities"], colors=leaves["colors"],
+                    background=torch.tensor([0.1, 0.5, 0.9]), groups=groups, num_groups=3, backend=backend,
+                    **geometry, **kw)
+    g = torch.Generator().manual_seed(7)  # the same random cotangents for both backends
+    loss = ((out.rgb * torch.rand(out.rgb.shape, generator=g)).sum() + (out.alpha * torch.rand(out.alpha.shape, generator=g)).sum()
+            + (out.group_alpha[1] * torch.rand(out.alpha.shape, generator=g)).sum() + 0.1 * out.depth.sum())
+    loss.backward()
+    return out, {k: v.grad for k, v in leaves.items()}
+
+
+def assert_grad_close(reference: torch.Tensor, other: torch.Tensor, name: str) -> None:
+    rel = float((reference - other).norm() / reference.norm().clamp(min=1e-30))
+    cos = float(torch.nn.functional.cosine_similarity(reference.flatten(), other.flatten(), dim=0))
+    assert rel < GRAD_REL and cos > GRAD_COS, f"{name}: relative L2 {rel:.2e}, cosine {cos:.8f}"
+
+
+@needs_cpu_kernel
+@pytest.mark.parametrize("kind", ["random", "behind", "border", "degenerate"])
+@pytest.mark.parametrize("covariance_input", [False, True])
+@pytest.mark.parametrize("antialiased", [False, True])
+def test_cpu_backend_matches_the_torch_reference(kind, covariance_input, antialiased):
+    params, cam = scene(kind), camera()
+    ref, ref_grads = render_with_grads("torch", params, cam, covariance_input, antialiased=antialiased)
+    out, grads = render_with_grads("cpu", params, cam, covariance_input, antialiased=antialiased)
+    for name in ("rgb", "alpha", "depth", "group_alpha"):
+        torch.testing.assert_close(getattr(out, name), getattr(ref, name), rtol=0, atol=IMAGE_ATOL)
+    assert ref.alpha.max() > 0.5  # the scene draws something
+    for name in params:
+        assert_grad_close(ref_grads[name], grads[name], name)
+    assert torch.equal(out.radii, ref.radii)
+
+
+def test_binning_loses_nothing():
+    """Per-tile compositing equals compositing every pixel against every Gaussian."""
+    for kind in ("random", "border", "degenerate"):
+        params, cam = scene(kind, n=150), camera(40, 30)
+        p = project_gaussians(params["means"], quat_scale_to_covariance(params["quats"], params["scales"]),
+                              params["opacities"], cam)
+        bins = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16)
+        tiled = composite_torch(p.means2d, p.conics, p.opacities, params["colors"], bins, cam.width, cam.height)
+        dense = composite_dense(p.means2d, p.conics, p.opacities, params["colors"], p.depths, p.visible,
+                                cam.width, cam.height)
+        torch.testing.assert_close(tiled, dense, rtol=0, atol=1e-6)
+
+
+@needs_cpu_kernel
+def test_cpu_binning_equals_torch_binning():
+    params, cam = scene("border", n=500), camera(70, 50)
+    p = project_gaussians(params["means"], quat_scale_to_covariance(params["quats"], params["scales"]),
+                          params["opacities"], cam)
+    p.depths[::7] = p.depths[3]  # ties broken by index in both
+    a = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16, use_cpu_kernel=False)
+    b = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16, use_cpu_kernel=True)
+    assert torch.equal(a.gaussian_ids, b.gaussian_ids) and torch.equal(a.tile_offsets, b.tile_offsets)
+
+
+def test_torch_reference_gradients_match_finite_differences():
+    torch.manual_seed(3)
+    cam = camera(12, 10, focal=10.0, dtype=torch.float64)
+    n = 5
+    means = (torch.randn(n, 3, dtype=torch.float64) * 0.3 + torch.tensor([0.0, 0.0, 3.0], dtype=torch.float64))
+    quats = torch.randn(n, 4, dtype=torch.float64)
+    scales = torch.rand(n, 3, dtype=torch.float64) * 0.3 + 0.2
+    opacities = torch.rand(n, dtype=torch.float64) * 0.5 + 0.3
+    colors = torch.rand(n, 3, dtype=torch.float64)
+
+    def image(means, quats, scales, opacities, colors):
+        out = rasterize(cam, means=means, quats=quats, scales=scales, opacities=opacities, colors=colors,
+                        background=torch.tensor([0.3, 0.2, 0.1], dtype=torch.float64), backend="torch")
+        return out.rgb
+
+    inputs = [t.requires_grad_(True) for t in (means, quats, scales, opacities, colors)]
+    assert torch.autograd.gradcheck(image, inputs, eps=1e-6, atol=1e-6, rtol=1e-4)
+
+
+@pytest.mark.parametrize("backend", ["torch", pytest.param("cpu", marks=needs_cpu_kernel)])
+def test_a_single_gaussian_has_the_closed_form_image(backend):
+    """An isotropic Gaussian on the optical axis: alpha(u, v) = o exp(-d²/(2 s²)), s² = (f σ/z)² + 0.3,
+    centred on the principal point (OpenCV pixel convention: the centre of pixel (u, v) is (u, v))."""
+    cam = camera(33, 25, focal=40.0)
+    sigma, z, o = 0.05, 2.0, 0.8
+    out = rasterize(cam, means=torch.tensor([[0.0, 0.0, z]]), quats=torch.tensor([[1.0, 0, 0, 0]]),
+                    scales=torch.full((1, 3), sigma), opacities=torch.tensor([o]), colors=torch.ones(1, 3),
+                    backend=backend)
+    s2 = (40.0 * sigma / z) ** 2 + LOW_PASS
+    v, u = torch.meshgrid(torch.arange(25.0), torch.arange(33.0), indexing="ij")
+    expected = o * torch.exp(-((u - 16.0) ** 2 + (v - 12.0) ** 2) / (2 * s2))
+    expected = torch.where(expected >= 1 / 255, expected, torch.zeros_like(expected))
+    torch.testing.assert_close(out.alpha, expected, rtol=0, atol=2e-6)
+    assert out.alpha.argmax() == 12 * 33 + 16
+    torch.testing.assert_close(out.depth[12, 16], torch.tensor(z))
+
+
+@pytest.mark.parametrize("backend", ["torch", pytest.param("cpu", marks=needs_cpu_kernel)])
+def test_a_projected_point_lands_on_its_pixel(backend):
+    cam = camera(50, 40, focal=45.0)
+    cam = Camera(cam.K, torch.tensor([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), torch.tensor([0.2, -0.1, 3.0]), 50, 40)
+    for u, v in ((7, 31), (42, 5)):
+        ray = torch.linalg.solve(cam.K, torch.tensor([u, v, 1.0])) * 2.5  # camera frame point at depth 2.5
+        world = cam.R.T @ (ray - cam.t)
+        out = rasterize(cam, means=world[None], quats=torch.tensor([[1.0, 0, 0, 0]]), scales=torch.full((1, 3), 0.01),
+                        opacities=torch.tensor([0.9]), colors=torch.ones(1, 3), backend=backend)
+        assert divmod(int(out.alpha.argmax()), 50) == (v, u)
+        assert out.alpha[v, u - 1] == pytest.approx(float(out.alpha[v, u + 1]), abs=1e-5)  # float32 round trip
+
+
+def test_groups_background_sh_and_screen_gradients():
+    params, cam = scene("random", n=200), camera()
+    sh = torch.zeros(200, 9, 3)
+    sh[:, 0] = (params["colors"] - 0.5) / C0  # DC only: the same colour from every direction
+    background = torch.tensor([0.2, 0.4, 0.6])
+    a = rasterize(cam, means=params["means"], quats=params["quats"], scales=params["scales"],
+                  opacities=params["opacities"], colors=params["colors"], background=background,
+                  groups=torch.arange(200) % 4, num_groups=4, backend="torch")
+    b = rasterize(cam, means=params["means"], quats=params["quats"], scales=params["scales"],
+                  opacities=params["opacities"], sh=sh, background=background, backend="torch")
+    torch.testing.assert_close(a.rgb, b.rgb, rtol=0, atol=1e-6)
+    torch.testing.assert_close(a.group_alpha.sum(0), a.alpha, rtol=0, atol=1e-6)
+    none = rasterize(cam, means=params["means"][:0], quats=params["quats"][:0], scales=params["scales"][:0],
+                     opacities=params["opacities"][:0], colors=params["colors"][:0], background=background,
+                     backend="torch")
+    torch.testing.assert_close(none.rgb, background.expand(48, 64, 3))
+    means = params["means"].clone().requires_grad_(True)
+    out = rasterize(cam, means=means, quats=params["quats"], scales=params["scales"], opacities=params["opacities"],
+                    colors=params["colors"], backend="torch")
+    out.means2d.retain_grad()
+    out.rgb.sum().backward()
+    assert out.means2d.grad is not None and (out.means2d.grad[out.visible].abs().sum(1) > 0).float().mean() > 0.5
+    assert ((out.radii > 0) == out.visible).all()
+
+
+def test_hidden_gaussians_are_culled():
+    params = scene("behind", n=90)
+    out = rasterize(camera(), means=params["means"], quats=params["quats"], scales=params["scales"],
+                    opacities=params["opacities"], colors=params["colors"], backend="torch")
+    assert not out.visible[:30].any() and (out.radii[:30] == 0).all()
+
+
+@needs_cuda
+def test_gsplat_matches_the_cpu_backend():
+    params, cam = scene("random"), camera()
+    cpu, cpu_grads = render_with_grads("cpu" if cpu_available() else "torch", params, cam)
+    cuda_params = {k: v.cuda() for k, v in params.items()}
+    cuda_cam = Camera(cam.K.cuda(), cam.R.cuda(), cam.t.cuda(), cam.width, cam.height)
+    gpu, gpu_grads = render_with_grads("gsplat", cuda_params, cuda_cam)
+    torch.testing.assert_close(gpu.rgb.cpu(), cpu.rgb, rtol=0, atol=1e-3)
+    for name in params:
+        assert_grad_close(cpu_grads[name], gpu_grads[name].cpu(), name)
