@@ -1,4 +1,4 @@
-"""The C++ compositing kernel (csrc/composite_cpu.cpp): built on first use, cached.
+"""The C++ kernels (csrc/: tile binning and compositing, projection): built on first use, cached.
 
 The build cache is keyed by the source, the flags and torch's version, under
 $GLIMPSE_CACHE (default ~/.cache/glimpse). Flags are portable (-O3 -mavx2 -mfma, plus
@@ -24,7 +24,7 @@ from glimpse.errors import GlimpseError
 from glimpse.render.binning import TileBins
 
 log = logging.getLogger("glimpse")
-SOURCE = Path(__file__).resolve().parent / "csrc" / "composite_cpu.cpp"
+SOURCES = [Path(__file__).resolve().parent / "csrc" / name for name in ("composite_cpu.cpp", "project_cpu.cpp")]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).
@@ -44,13 +44,16 @@ def _cpu_has_simd() -> bool:
 def _build(flags: list[str]) -> ModuleType:
     from torch.utils.cpp_extension import load
 
-    key = hashlib.sha256(SOURCE.read_bytes() + " ".join(flags).encode() + torch.__version__.encode()).hexdigest()[:12]
+    digest = hashlib.sha256(" ".join(flags).encode() + torch.__version__.encode())
+    for source in SOURCES:
+        digest.update(source.read_bytes())
+    key = digest.hexdigest()[:12]
     name = f"glimpse_composite_cpu_{key}"
     root = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "extensions" / name
     root.mkdir(parents=True, exist_ok=True)
     if not (root / f"{name}.so").exists():
         log.info("building the C++ rasterizer (%s), once: about a minute", " ".join(flags))
-    return load(name=name, sources=[str(SOURCE)], extra_cflags=flags, extra_ldflags=["-fopenmp"],
+    return load(name=name, sources=[str(s) for s in SOURCES], extra_cflags=flags, extra_ldflags=["-fopenmp"],
                 build_directory=str(root), verbose=False)
 
 

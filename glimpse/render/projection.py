@@ -108,8 +108,14 @@ def project_gaussians(means: Tensor, covariances: Tensor, opacities: Tensor, cam
     det_safe = torch.where(valid, det, torch.ones_like(det))
     conics = torch.stack([c / det_safe, -b0 / det_safe, a / det_safe], dim=-1)
     means2d = torch.stack([fx * x / z_safe + cx, fy * y / z_safe + cy], dim=-1)
+    return _finish_projection(means2d, conics, z, opacities, torch.stack([a, b0, c], -1).detach(), valid, camera)
 
+
+def _finish_projection(means2d: Tensor, conics: Tensor, depths: Tensor, opacities: Tensor, cov2d: Tensor,
+                       valid: Tensor, camera: Camera) -> Projected:
+    """Screen extents, radii and visibility (no gradients) from the dilated 2D covariances [N, 3] (a, b, c)."""
     with torch.no_grad():
+        a, b, c = cov2d.unbind(-1)
         # alpha = o exp(-s) >= 1/255 only where s <= ln(255 o): an ellipse with these half-extents
         level = torch.log(torch.clamp(opacities.detach() / ALPHA_MIN, min=1.0))
         extents = torch.stack([torch.sqrt(2 * level * a), torch.sqrt(2 * level * c)], -1) * (1 + EXTENT_SAFETY)
@@ -117,10 +123,45 @@ def project_gaussians(means: Tensor, covariances: Tensor, opacities: Tensor, cam
         on_image = ((mx + extents[:, 0] >= 0) & (mx - extents[:, 0] <= camera.width - 1)
                     & (my + extents[:, 1] >= 0) & (my - extents[:, 1] <= camera.height - 1))
         visible = valid & on_image & (level > 0)
-        largest = 0.5 * (a + c) + torch.sqrt(torch.clamp(0.25 * (a - c) ** 2 + b0 * b0, min=0.0))
+        largest = 0.5 * (a + c) + torch.sqrt(torch.clamp(0.25 * (a - c) ** 2 + b * b, min=0.0))
         radii = torch.where(visible, torch.ceil(RADIUS_SIGMAS * torch.sqrt(largest)), torch.zeros_like(a))
-    return Projected(means2d=means2d, conics=conics, depths=z, opacities=opacities, radii=radii.to(torch.int32),
-                     extents=extents, visible=visible)
+        extents = torch.where(visible[:, None], extents, torch.zeros_like(extents))
+    return Projected(means2d=means2d, conics=conics, depths=depths, opacities=opacities,
+                     radii=radii.to(torch.int32), extents=extents, visible=visible)
+
+
+class _ProjectCPU(torch.autograd.Function):
+    """The C++ projection (csrc/project_cpu.cpp) with its hand-written backward."""
+
+    @staticmethod
+    def forward(ctx, means: Tensor, covariances: Tensor, opacities: Tensor, camera: Camera, antialiased: bool):
+        from glimpse.render.composite_cpu import extension
+
+        inputs = [t.detach().float().contiguous() for t in (means, covariances, opacities)]
+        geometry = (camera.K.cpu(), camera.R.cpu(), camera.t.cpu(), camera.width, camera.height, camera.near,
+                    camera.far, antialiased)
+        means2d, conics, depths, opacities_out, cam, cov2d, valid = extension().project_forward(*inputs, *geometry)
+        ctx.save_for_backward(*inputs, cam)
+        ctx.geometry = geometry
+        ctx.mark_non_differentiable(cov2d, valid)
+        return means2d, conics, depths, opacities_out, cov2d, valid
+
+    @staticmethod
+    def backward(ctx, v_means2d, v_conics, v_depths, v_opacities, _v_cov2d, _v_valid):
+        from glimpse.render.composite_cpu import extension
+
+        means, covariances, opacities, cam = ctx.saved_tensors
+        grads = extension().project_backward(means, covariances, opacities, cam, *ctx.geometry, v_means2d.float(),
+                                             v_conics.float(), v_depths.float(), v_opacities.float())
+        return (*grads, None, None)
+
+
+def project_gaussians_cpu(means: Tensor, covariances: Tensor, opacities: Tensor, camera: Camera,
+                          antialiased: bool = False) -> Projected:
+    """project_gaussians computed by the C++ kernel (float32); same outputs and gradients."""
+    means2d, conics, depths, opacities_out, cov2d, valid = _ProjectCPU.apply(means, covariances, opacities, camera,
+                                                                            antialiased)
+    return _finish_projection(means2d, conics, depths, opacities_out, cov2d, valid, camera)
 
 
 def fov_to_focal(fov_deg: float, pixels: int) -> float:

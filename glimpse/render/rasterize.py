@@ -25,7 +25,9 @@ from torch import Tensor
 
 from glimpse.render.binning import bin_gaussians
 from glimpse.render.composite_torch import composite_torch
-from glimpse.render.projection import Camera, Projected, project_gaussians, quat_scale_to_covariance
+from glimpse.render.projection import (
+    Camera, Projected, project_gaussians, project_gaussians_cpu, quat_scale_to_covariance,
+)
 from glimpse.render.sh import sh_to_rgb
 
 Backend = Literal["auto", "cpu", "torch", "gsplat"]
@@ -115,7 +117,8 @@ def rasterize(
         image, projected = rasterize_gsplat(camera, means, covariances, opacities,
                                             _features(rgb, depths, groups, num_groups or 0), antialiased)
     else:
-        projected = project_gaussians(means, covariances, opacities, camera, antialiased)
+        project = project_gaussians_cpu if name == "cpu" else project_gaussians
+        projected = project(means, covariances, opacities, camera, antialiased)
         features = _features(rgb, projected.depths, groups, num_groups or 0)
         image = _composite(name, projected, features, camera)
     return _finish(image, projected, background, groups is not None, name)

@@ -295,7 +295,19 @@ std::vector<torch::Tensor> bin_tiles(torch::Tensor rects, torch::Tensor ids, int
   return {entries, offsets};
 }
 
+// project_cpu.cpp
+std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor covariances, torch::Tensor opacities,
+                                           torch::Tensor K, torch::Tensor R, torch::Tensor t, int64_t width,
+                                           int64_t height, double near, double far, bool antialiased);
+std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor covariances, torch::Tensor opacities,
+                                            torch::Tensor cam, torch::Tensor K, torch::Tensor R, torch::Tensor t,
+                                            int64_t width, int64_t height, double near, double far, bool antialiased,
+                                            torch::Tensor v_means2d, torch::Tensor v_conics, torch::Tensor v_depths,
+                                            torch::Tensor v_opac_out);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+  m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
+  m.def("project_backward", &project_backward, "EWA projection, backward (CPU)");
   m.def("bin_tiles", &bin_tiles, "Tile binning by counting sort (CPU)");
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
