@@ -37,9 +37,10 @@ help:
 	@echo "make test | make bench         tests | benchmarks"
 	@echo "options: OUT=dir (default runs/), PARAMS=\"section.key=value ...\", PIPELINE_YAML=file"
 
-$(VENV)/.installed: requirements.txt $(CONSTRAINTS)
+$(VENV)/.installed: requirements.txt requirements-nodeps.txt $(CONSTRAINTS)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet -c $(CONSTRAINTS) torch -r requirements.txt
+	$(PY) -m pip install --quiet --no-deps -r requirements-nodeps.txt
 	touch $@
 
 venv: $(VENV)/.installed

@@ -10,7 +10,7 @@ HERE = Path(__file__).resolve().parent
 def main() -> int:
     failures = 0
     for script in sorted(HERE.glob("*.py")):
-        if script.name == Path(__file__).name:
+        if script.name == Path(__file__).name or script.name.startswith("_"):
             continue
         print(f"\n## {script.stem}\n", flush=True)
         failures += subprocess.run([sys.executable, str(script)], cwd=HERE.parent).returncode != 0

@@ -1,0 +1,91 @@
+"""Training losses: L1, MSE, D-SSIM, LPIPS and the hard-surface alpha regulariser.
+
+Shapes follow :mod:`glimpse.metrics`: images ``[..., H, W, 3]`` in [0, 1], masks
+``[..., H, W]`` (bool or float weights). Every loss returns a 0-d tensor, the mean over
+everything it covers; with a mask, the mean over the masked pixels of the whole batch (pixel
+losses, D-SSIM, hard surface; so an image weighs by its masked area) or over images with both
+inputs zeroed outside the mask (LPIPS, the official code's convention).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from glimpse.lpips import LPIPS
+from glimpse.metrics import SSIM_RADIUS, ssim_map
+
+# -log(exp(-a) + exp(a - 1)) is smallest at a = 0 and a = 1, where it equals -log(1 + e^-1);
+# adding log(1 + e^-1) = 0.31326... makes the minimum exactly 0 (LOLNeRF; the authors' code
+# adds the rounded 0.313 in `denisty_reg_loss`). Its maximum, at a = 0.5, is then
+# log(1 + e^-1) - log(2 e^-0.5) = 0.12011...
+HARD_SURFACE_OFFSET = math.log1p(math.exp(-1.0))
+
+
+def _pooled_mean(values: Tensor, mask: Tensor | None) -> Tensor:
+    """Mean of ``values [..., H, W, C]`` over everything, or over the pixels of ``mask [..., H, W]``."""
+    if mask is None:
+        return values.mean()
+    if mask.shape != values.shape[:-1]:
+        raise ValueError(f"mask must be {tuple(values.shape[:-1])}, found {tuple(mask.shape)}")
+    weights = mask.to(device=values.device, dtype=values.dtype).unsqueeze(-1)
+    return (values * weights).sum() / (weights.sum() * values.shape[-1])
+
+
+def l1_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
+    """Mean absolute error over all pixels and channels (or over the masked pixels)."""
+    return _pooled_mean((pred - target).abs(), mask)
+
+
+def mse_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
+    """Mean squared error over all pixels and channels (or over the masked pixels)."""
+    return _pooled_mean((pred - target) ** 2, mask)
+
+
+def dssim_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
+    """``1 - SSIM`` (scikit-image protocol, see :func:`glimpse.metrics.ssim`), mean over images.
+
+    Without a mask: 1 - mean of the SSIM map less its 5-pixel border (scikit-image's mean);
+    with one: 1 - mean of the full map over the masked pixels. Images need H, W >= 11.
+    """
+    full = ssim_map(pred, target)
+    if mask is None:
+        return 1.0 - full[..., SSIM_RADIUS:-SSIM_RADIUS, SSIM_RADIUS:-SSIM_RADIUS, :].mean()
+    return 1.0 - _pooled_mean(full, mask)
+
+
+def lpips_loss(lpips_module: LPIPS, pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
+    """Mean LPIPS distance (raw, not x100) over the batch.
+
+    pred, target: ``[B, H, W, 3]`` or ``[H, W, 3]``; mask: optional ``[B, H, W]`` / ``[H, W]``:
+    both images are multiplied by it (black outside) before LPIPS.
+    """
+    if mask is not None:
+        if mask.shape != pred.shape[:-1]:
+            raise ValueError(f"mask must be {tuple(pred.shape[:-1])}, found {tuple(mask.shape)}")
+        weights = mask.to(device=pred.device, dtype=pred.dtype).unsqueeze(-1)
+        pred, target = pred * weights, target * weights.to(target.dtype)
+    return lpips_module(pred, target).mean()
+
+
+def hard_surface(alpha: Tensor) -> Tensor:
+    """Element-wise ``-log(exp(-a) + exp(a - 1)) + HARD_SURFACE_OFFSET``, 0 at a in {0, 1}.
+
+    Pushes each alpha towards 0 or 1 (not only up, unlike the paper's printed Eq. 12). Meant
+    for alpha in [0, 1]: outside that range it goes negative and would push alpha further out.
+    """
+    return HARD_SURFACE_OFFSET - torch.logaddexp(-alpha, alpha - 1.0)
+
+
+def hard_surface_loss(alpha: Tensor, mask: Tensor | None = None) -> Tensor:
+    """Mean of :func:`hard_surface` over all of ``alpha`` (any shape, e.g. ``[..., H, W]``
+    or per-Gaussian ``[N]``) or over the elements where ``mask`` (same shape) is set."""
+    values = hard_surface(alpha)
+    if mask is None:
+        return values.mean()
+    if mask.shape != alpha.shape:
+        raise ValueError(f"mask must have alpha's shape {tuple(alpha.shape)}, found {tuple(mask.shape)}")
+    weights = mask.to(device=alpha.device, dtype=alpha.dtype)
+    return (values * weights).sum() / weights.sum()
