@@ -60,6 +60,21 @@ inline void box_range(float centre, float extent, int64_t start, int64_t stop, i
   hi = std::min<int64_t>(stop, static_cast<int64_t>(std::floor(centre + extent)) + 1);
 }
 
+// One Gaussian as a tile sees it: its parameters and its box clipped to the tile, [xa, xb) x [ya, yb).
+struct TileGaussian {
+  float mx, my, a, b, c, o;
+  const float* f;
+  int64_t xa, xb, ya, yb;
+};
+
+inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x1, int64_t y0, int64_t y1) {
+  TileGaussian t{in.means2d[2 * g], in.means2d[2 * g + 1], in.conics[3 * g], in.conics[3 * g + 1],
+                 in.conics[3 * g + 2], in.opacities[g], in.features + g * in.channels, 0, 0, 0, 0};
+  box_range(t.mx, in.extents[2 * g], x0, x1, t.xa, t.xb);
+  box_range(t.my, in.extents[2 * g + 1], y0, y1, t.ya, t.yb);
+  return t;
+}
+
 Inputs make_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& opacities,
                    const torch::Tensor& features, const torch::Tensor& extents, const torch::Tensor& offsets,
                    const torch::Tensor& ids, int64_t width, int64_t height, int64_t tile) {
@@ -112,13 +127,10 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
       const int start = in.offsets[k], stop = in.offsets[k + 1];
       for (int e = start; e < stop && remaining > 0; ++e) {
         const int g = in.ids[e];
-        const float mx = in.means2d[2 * g], my = in.means2d[2 * g + 1];
-        const float a = in.conics[3 * g], b = in.conics[3 * g + 1], c = in.conics[3 * g + 2];
-        const float o = in.opacities[g];
-        const float* f = in.features + g * C;
-        int64_t xa, xb, ya, yb;
-        box_range(mx, in.extents[2 * g], x0, x1, xa, xb);
-        box_range(my, in.extents[2 * g + 1], y0, y1, ya, yb);
+        const TileGaussian tg = tile_gaussian(in, g, x0, x1, y0, y1);
+        const float mx = tg.mx, my = tg.my, a = tg.a, b = tg.b, c = tg.c, o = tg.o;
+        const float* f = tg.f;
+        const int64_t xa = tg.xa, xb = tg.xb, ya = tg.ya, yb = tg.yb;
         for (int64_t y = ya; y < yb; ++y) {
           const float dy = my - static_cast<float>(y);
           const int width_in_box = static_cast<int>(xb - xa);
@@ -204,13 +216,10 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
       const int start = in.offsets[k];
       for (int e = start + max_last - 1; e >= start; --e) {  // back to front
         const int g = in.ids[e];
-        const float mx = in.means2d[2 * g], my = in.means2d[2 * g + 1];
-        const float a = in.conics[3 * g], b = in.conics[3 * g + 1], c = in.conics[3 * g + 2];
-        const float o = in.opacities[g];
-        const float* f = in.features + g * C;
-        int64_t xa, xb, ya, yb;
-        box_range(mx, in.extents[2 * g], x0, x1, xa, xb);
-        box_range(my, in.extents[2 * g + 1], y0, y1, ya, yb);
+        const TileGaussian tg = tile_gaussian(in, g, x0, x1, y0, y1);
+        const float mx = tg.mx, my = tg.my, a = tg.a, b = tg.b, c = tg.c, o = tg.o;
+        const float* f = tg.f;
+        const int64_t xa = tg.xa, xb = tg.xb, ya = tg.ya, yb = tg.yb;
         std::fill(local.begin(), local.end(), 0.0f);
         bool touched = false;
         for (int64_t y = ya; y < yb; ++y) {

@@ -68,6 +68,19 @@ inline Jacobian jacobian(const CameraParams& c, float x, float y, float z) {
   return j;
 }
 
+// The undilated 2D covariance [[a0, b0], [b0, c0]] = M Σ Mᵀ of a 3x3 covariance Σ (row-major);
+// also leaves M Σ (2x3) in MS for the backward.
+struct Cov2d {
+  float a0, b0, c0;
+};
+
+inline Cov2d projected_covariance(const Jacobian& j, const float* S, float* MS) {
+  for (int r = 0; r < 2; ++r)
+    for (int k = 0; k < 3; ++k) MS[3 * r + k] = j.M[3 * r] * S[k] + j.M[3 * r + 1] * S[3 + k] + j.M[3 * r + 2] * S[6 + k];
+  return {MS[0] * j.M[0] + MS[1] * j.M[1] + MS[2] * j.M[2], MS[0] * j.M[3] + MS[1] * j.M[4] + MS[2] * j.M[5],
+          MS[3] * j.M[3] + MS[4] * j.M[4] + MS[5] * j.M[5]};
+}
+
 }  // namespace
 
 // means [N,3], covariances [N,3,3], opacities [N] (float32, contiguous) ->
@@ -101,14 +114,9 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor co
       const bool in_depth = p[2] > c.near && p[2] < c.far;
       const float z = in_depth ? p[2] : 1.0f;
       const Jacobian j = jacobian(c, p[0], p[1], z);
-      const float* Si = S + 9 * i;
       float MS[6];  // M Σ
-      for (int r = 0; r < 2; ++r)
-        for (int k = 0; k < 3; ++k)
-          MS[3 * r + k] = j.M[3 * r] * Si[k] + j.M[3 * r + 1] * Si[3 + k] + j.M[3 * r + 2] * Si[6 + k];
-      const float a0 = MS[0] * j.M[0] + MS[1] * j.M[1] + MS[2] * j.M[2];
-      const float b0 = MS[0] * j.M[3] + MS[1] * j.M[4] + MS[2] * j.M[5];
-      const float c0 = MS[3] * j.M[3] + MS[4] * j.M[4] + MS[5] * j.M[5];
+      const Cov2d cov = projected_covariance(j, S + 9 * i, MS);
+      const float a0 = cov.a0, b0 = cov.b0, c0 = cov.c0;
       const float a = a0 + kLowPass, cc = c0 + kLowPass, det = a * cc - b0 * b0;
       const bool valid = in_depth && det > 0.0f;
       vv[i] = valid;
@@ -157,14 +165,9 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor c
       const bool in_depth = p[2] > c.near && p[2] < c.far;
       const float z = in_depth ? p[2] : 1.0f;
       const Jacobian j = jacobian(c, p[0], p[1], z);
-      const float* Si = S + 9 * i;
-      float MS[6];
-      for (int r = 0; r < 2; ++r)
-        for (int k = 0; k < 3; ++k)
-          MS[3 * r + k] = j.M[3 * r] * Si[k] + j.M[3 * r + 1] * Si[3 + k] + j.M[3 * r + 2] * Si[6 + k];
-      const float a0 = MS[0] * j.M[0] + MS[1] * j.M[1] + MS[2] * j.M[2];
-      const float b0 = MS[0] * j.M[3] + MS[1] * j.M[4] + MS[2] * j.M[5];
-      const float c0 = MS[3] * j.M[3] + MS[4] * j.M[4] + MS[5] * j.M[5];
+      float MS[6];  // M Σ
+      const Cov2d cov = projected_covariance(j, S + 9 * i, MS);
+      const float a0 = cov.a0, b0 = cov.b0, c0 = cov.c0;
       const float a = a0 + kLowPass, cc = c0 + kLowPass, det = a * cc - b0 * b0;
       const bool valid = in_depth && det > 0.0f;
       // opacity
