@@ -50,6 +50,8 @@ import cv2
 import numpy as np
 import yaml
 
+from glimpse.fixtures.textures import surface_texture
+
 __all__ = [
     "PERSON_HEIGHT",
     "PERSON_ID",
@@ -209,87 +211,6 @@ def person_positions(n_frames: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------ textures
-def _procedural_texture(
-    rng: np.random.Generator, width_m: float, height_m: float, texels_per_metre: float,
-    shapes_per_m2: float = 110.0, min_size_m: float = 0.015, max_size_m: float = 0.6,
-) -> np.ndarray:
-    """A rich, non-repetitive colour texture for a ``width_m x height_m`` surface.
-
-    Colour value noise (random lattices from 1 m down to 3 cm, bicubically
-    upsampled and summed) under random shapes of log-uniform size between
-    ``min_size_m`` and ``max_size_m`` (rotated rectangles, discs, rings,
-    ellipses and arcs, lines, star/blob polygons, letters), drawn largest first
-    so that the small ones stay visible on top.
-
-    Returns:
-        (H, W, 3) uint8 image, ``W = round(width_m * texels_per_metre)`` and
-        ``H = round(height_m * texels_per_metre)``; texel ``(i, j)`` covers
-        ``[j, j + 1] x [i, i + 1] / texels_per_metre`` metres of the surface.
-    """
-    w = max(8, int(round(width_m * texels_per_metre)))
-    h = max(8, int(round(height_m * texels_per_metre)))
-    acc = np.zeros((h, w, 3), np.float32)
-    amp_total = 0.0
-    for cell_m, amp in ((1.0, 1.0), (0.5, 0.8), (0.25, 0.6), (0.12, 0.45), (0.06, 0.3), (0.03, 0.2)):
-        gh = max(2, int(math.ceil(height_m / cell_m)) + 1)
-        gw = max(2, int(math.ceil(width_m / cell_m)) + 1)
-        grid = rng.random((gh, gw, 3), dtype=np.float32)
-        acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
-        amp_total += amp
-    acc /= amp_total
-    lo, hi = np.percentile(acc[::4, ::4], [1.0, 99.0])
-    img = np.clip((acc - lo) / max(hi - lo, 1e-6) * 255.0, 0, 255).astype(np.uint8)
-
-    n_shapes = int(round(width_m * height_m * shapes_per_m2))
-    sizes = np.exp(rng.uniform(math.log(min_size_m), math.log(max_size_m), n_shapes))
-    sizes = np.sort(sizes)[::-1] * texels_per_metre  # largest first, in texels
-    kinds = rng.integers(0, 7, n_shapes)
-    centres = rng.uniform([0.0, 0.0], [w, h], (n_shapes, 2))
-    colours = rng.integers(0, 256, (n_shapes, 3))
-    params = rng.random((n_shapes, 8))
-    letters = "ABCDEFGHJKLMNPQRSTUVWXYZ0123456789#%&@"
-    for size, kind, (cx, cy), col, p in zip(sizes, kinds, centres, colours, params):
-        colour = tuple(int(c) for c in col)
-        centre = (int(cx), int(cy))
-        half = max(1.0, 0.5 * size)
-        if kind == 0:  # rotated rectangle, filled or outlined
-            box = cv2.boxPoints(((cx, cy), (size, size * (0.2 + 0.8 * p[0])), 180.0 * p[1]))
-            pts = [np.round(box).astype(np.int32)]
-            if p[2] < 0.7:
-                cv2.fillPoly(img, pts, colour, cv2.LINE_AA)
-            else:
-                cv2.polylines(img, pts, True, colour, max(1, int(size * 0.08)), cv2.LINE_AA)
-        elif kind == 1:  # disc or ring
-            thickness = -1 if p[0] < 0.6 else max(1, int(half * (0.1 + 0.3 * p[1])))
-            cv2.circle(img, centre, int(half), colour, thickness, cv2.LINE_AA)
-        elif kind == 2:  # ellipse or arc
-            axes = (int(half), max(1, int(half * (0.2 + 0.8 * p[0]))))
-            start = 360.0 * p[2]
-            sweep = 360.0 if p[3] < 0.5 else 90.0 + 220.0 * p[4]
-            thickness = -1 if p[5] < 0.5 else max(1, int(half * 0.15))
-            cv2.ellipse(img, centre, axes, 180.0 * p[1], start, start + sweep, colour, thickness,
-                        cv2.LINE_AA)
-        elif kind == 3:  # line segment
-            a = 2.0 * math.pi * p[0]
-            d = np.array([math.cos(a), math.sin(a)]) * half
-            p0 = (int(cx - d[0]), int(cy - d[1]))
-            p1 = (int(cx + d[0]), int(cy + d[1]))
-            cv2.line(img, p0, p1, colour, max(1, int(size * 0.06 * (0.3 + p[1]))), cv2.LINE_AA)
-        elif kind in (4, 5):  # star-shaped blob polygon
-            n_vert = 3 + int(p[0] * 7)
-            angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, n_vert))
-            radii = half * rng.uniform(0.3, 1.0, n_vert)
-            pts = np.stack([cx + radii * np.cos(angles), cy + radii * np.sin(angles)], axis=1)
-            cv2.fillPoly(img, [np.round(pts).astype(np.int32)], colour, cv2.LINE_AA)
-        else:  # a letter or digit
-            ch = letters[int(p[0] * len(letters))]
-            scale = size / 30.0
-            thickness = max(1, int(size * (0.05 + 0.1 * p[1])))
-            cv2.putText(img, ch, (int(cx - half), int(cy + half)), cv2.FONT_HERSHEY_SIMPLEX,
-                        scale, colour, thickness, cv2.LINE_AA)
-    return img
-
-
 def _pyramid(img: np.ndarray, min_size: int = 4) -> list[np.ndarray]:
     """Gaussian image pyramid, (H, W, 3) uint8 at level 0, halved per level."""
     levels = [img]
@@ -399,15 +320,15 @@ class RoomRenderer:
         extent = ROOM_MAX - ROOM_MIN
         self._pyramids: list[list[np.ndarray]] = []
         for u_axis, v_axis in _FACE_AXES:
-            tex = _procedural_texture(rng, extent[u_axis], extent[v_axis], self.texels_per_metre)
+            tex = surface_texture(rng, extent[u_axis], extent[v_axis], self.texels_per_metre)
             self._pyramids.append(_pyramid(tex))
         # The person: its own texture (finer shapes, it is seen from nearby),
         # wrapped around the cylinder; the cap gets a small one of its own.
         circumference = 2.0 * math.pi * PERSON_RADIUS
         ptpm = PERSON_TEXELS_PER_METRE
-        side = _procedural_texture(rng, circumference, PERSON_HEIGHT, ptpm,
+        side = surface_texture(rng, circumference, PERSON_HEIGHT, ptpm,
                                    shapes_per_m2=500.0, min_size_m=0.008, max_size_m=0.3)
-        cap = _procedural_texture(rng, 2 * PERSON_RADIUS, 2 * PERSON_RADIUS, ptpm,
+        cap = surface_texture(rng, 2 * PERSON_RADIUS, 2 * PERSON_RADIUS, ptpm,
                                   shapes_per_m2=500.0, min_size_m=0.008, max_size_m=0.3)
         self._pyramids.append(_pyramid(side))
         self._pyramids.append(_pyramid(cap))
