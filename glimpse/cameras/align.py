@@ -51,3 +51,24 @@ def umeyama(source: np.ndarray, target: np.ndarray) -> Similarity:
     scale = float(np.trace(np.diag(D) @ S) / var_s)
     translation = mu_t - scale * rotation @ mu_s
     return Similarity(scale, rotation, translation)
+
+
+def align_cameras(source: dict[int, PinholeCamera], target: dict[int, PinholeCamera]) -> Similarity:
+    """Similarity taking ``source`` cameras (e.g. SfM's frame) onto ``target`` cameras of the same frames.
+
+    Camera centres alone leave the rotation about their line undetermined when the path is
+    straight (a dolly), so each camera also contributes two points along its viewing and
+    down axes, at a distance equal to the spread of the centres (scaled into the source's
+    units by a first, centre-only estimate of the scale).
+    """
+    common = sorted(set(source) & set(target))
+    src_c = np.array([source[f].centre for f in common])
+    dst_c = np.array([target[f].centre for f in common])
+    scale = umeyama(src_c, dst_c).scale
+    reach = max(float(np.linalg.norm(dst_c - dst_c.mean(0), axis=1).max()), 1e-6)
+
+    def augmented(cameras: dict[int, PinholeCamera], centres: np.ndarray, length: float) -> np.ndarray:
+        axes = [np.array([cameras[f].R[2] for f in common]), np.array([cameras[f].R[1] for f in common])]
+        return np.concatenate([centres] + [centres + length * a for a in axes])
+
+    return umeyama(augmented(source, src_c, reach / scale), augmented(target, dst_c, reach))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.cameras.align import umeyama
+from glimpse.cameras.align import align_cameras
 from glimpse.cameras.config import CamerasConfig
 from glimpse.cameras.frames import select_frame_ids, write_frames
 from glimpse.cameras.model import PinholeCamera, default_intrinsics
@@ -195,11 +195,11 @@ def estimate_cameras(
 def _align_to_given(
     cameras: dict[int, PinholeCamera], xyz: np.ndarray, given: dict[int, PinholeCamera]
 ) -> tuple[dict[int, PinholeCamera], np.ndarray, dict]:
-    """Similarity-align SfM cameras to the given ones by camera centres; report the residual (metres)."""
+    """Similarity-align SfM cameras to the given ones (centres and viewing axes); report the residual (metres)."""
     common = sorted(set(cameras) & set(given))
     if len(common) < 3:
         raise GlimpseError(f"cannot align SfM to the given cameras: only {len(common)} frames in common (need 3)")
-    sim = umeyama(np.array([cameras[f].centre for f in common]), np.array([given[f].centre for f in common]))
+    sim = align_cameras({f: cameras[f] for f in common}, {f: given[f] for f in common})
     aligned = {fid: sim.apply_to_camera(cam) for fid, cam in cameras.items()}
     errors = np.array([np.linalg.norm(aligned[f].centre - given[f].centre) for f in common])
     rot_errors = [
