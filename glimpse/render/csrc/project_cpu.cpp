@@ -81,6 +81,33 @@ inline Cov2d projected_covariance(const Jacobian& j, const float* S, float* MS) 
           MS[3] * j.M[3] + MS[4] * j.M[4] + MS[5] * j.M[5]};
 }
 
+// One Gaussian in front of the camera: what forward and backward both derive from its camera-frame
+// point p and 3x3 covariance S.
+struct Footprint {
+  Jacobian j;
+  float MS[6];              // M Σ
+  float a0, b0, c0;         // undilated 2D covariance
+  float a, cc, det;         // dilated diagonal and determinant
+  float z;                  // depth used in the projection (1 when out of the depth range)
+  bool in_depth, valid;
+};
+
+inline Footprint footprint(const CameraParams& c, const float* p, const float* S) {
+  Footprint f;
+  f.in_depth = p[2] > c.near && p[2] < c.far;
+  f.z = f.in_depth ? p[2] : 1.0f;
+  f.j = jacobian(c, p[0], p[1], f.z);
+  const Cov2d cov = projected_covariance(f.j, S, f.MS);
+  f.a0 = cov.a0;
+  f.b0 = cov.b0;
+  f.c0 = cov.c0;
+  f.a = f.a0 + kLowPass;
+  f.cc = f.c0 + kLowPass;
+  f.det = f.a * f.cc - f.b0 * f.b0;
+  f.valid = f.in_depth && f.det > 0.0f;
+  return f;
+}
+
 }  // namespace
 
 // means [N,3], covariances [N,3,3], opacities [N] (float32, contiguous) ->
@@ -111,14 +138,9 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor co
         p[r] = c.R[3 * r] * m[3 * i] + c.R[3 * r + 1] * m[3 * i + 1] + c.R[3 * r + 2] * m[3 * i + 2] + c.t[r];
       std::copy(p, p + 3, pc + 3 * i);
       d[i] = p[2];
-      const bool in_depth = p[2] > c.near && p[2] < c.far;
-      const float z = in_depth ? p[2] : 1.0f;
-      const Jacobian j = jacobian(c, p[0], p[1], z);
-      float MS[6];  // M Σ
-      const Cov2d cov = projected_covariance(j, S + 9 * i, MS);
-      const float a0 = cov.a0, b0 = cov.b0, c0 = cov.c0;
-      const float a = a0 + kLowPass, cc = c0 + kLowPass, det = a * cc - b0 * b0;
-      const bool valid = in_depth && det > 0.0f;
+      const Footprint fp = footprint(c, p, S + 9 * i);
+      const float a0 = fp.a0, b0 = fp.b0, c0 = fp.c0, a = fp.a, cc = fp.cc, det = fp.det, z = fp.z;
+      const bool valid = fp.valid;
       vv[i] = valid;
       c2[3 * i] = a;
       c2[3 * i + 1] = b0;
@@ -162,14 +184,11 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor c
   at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
       const float* p = pc + 3 * i;
-      const bool in_depth = p[2] > c.near && p[2] < c.far;
-      const float z = in_depth ? p[2] : 1.0f;
-      const Jacobian j = jacobian(c, p[0], p[1], z);
-      float MS[6];  // M Σ
-      const Cov2d cov = projected_covariance(j, S + 9 * i, MS);
-      const float a0 = cov.a0, b0 = cov.b0, c0 = cov.c0;
-      const float a = a0 + kLowPass, cc = c0 + kLowPass, det = a * cc - b0 * b0;
-      const bool valid = in_depth && det > 0.0f;
+      const Footprint fp = footprint(c, p, S + 9 * i);
+      const Jacobian& j = fp.j;
+      const float* MS = fp.MS;
+      const float a0 = fp.a0, b0 = fp.b0, c0 = fp.c0, a = fp.a, cc = fp.cc, det = fp.det, z = fp.z;
+      const bool in_depth = fp.in_depth, valid = fp.valid;
       // opacity
       float v_a0 = 0.0f, v_b0 = 0.0f, v_c0 = 0.0f, v_det = 0.0f;
       if (antialiased) {
