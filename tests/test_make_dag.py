@@ -56,8 +56,8 @@ def setup(tmp_path):
         (stages_dir / name).mkdir(parents=True)
         (stages_dir / name / "run.py").write_text(STAGE_SCRIPT.format(repo=str(REPO), stage=name))
     defaults = yaml.safe_load((REPO / "pipeline.yaml").read_text())
-    for name in STAGE_NAMES:
-        defaults.setdefault(name, {"knob": 1})
+    for name in STAGE_NAMES:  # a test-only parameter in every stage's section (the test's own copy)
+        defaults.setdefault(name, {})["knob"] = 1
     pipeline_yaml = tmp_path / "pipeline.yaml"
     pipeline_yaml.write_text(yaml.safe_dump(defaults))
     log = tmp_path / "ran.log"

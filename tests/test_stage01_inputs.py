@@ -81,15 +81,17 @@ def _make(*args, cwd=REPO):
                           capture_output=True, text=True, timeout=600)
 
 
-def test_make_all_runs_stage01_and_stops_at_the_first_unimplemented_stage(tmp_path):
-    make_room_scene(tmp_path / "scene", n_frames=4, width=64, height=48, camera="static")
+def test_make_all_runs_the_built_stages_and_stops_at_the_first_unimplemented_one(tmp_path):
+    from glimpse.fixtures.scenes import make_scene
+
+    make_scene("demo", tmp_path / "scene", "tiny", seed=0)
     result = _make("all", f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}")
+    run_dir = tmp_path / "out" / "demo_tiny"
     assert result.returncode != 0
-    assert "stage 02_smpl_fit is not implemented yet" in result.stderr
-    assert f"Finished stages (01_sfm) are in {tmp_path / 'out' / 'room'}/" in result.stderr
+    assert "stage 03_masks is not implemented yet" in result.stderr
+    assert f"Finished stages (01_sfm, 02_smpl_fit) are in {run_dir}/" in result.stderr
     assert "Traceback" not in result.stderr
-    assert (tmp_path / "out" / "room" / "01_sfm" / "manifest.json").is_file()
-    assert not (tmp_path / "out" / "room" / "02_smpl_fit").exists()
+    assert (run_dir / "02_smpl_fit" / "manifest.json").is_file() and not (run_dir / "03_masks").exists()
 
 
 def test_broken_scene_is_refused_with_every_problem_and_no_traceback(tmp_path):

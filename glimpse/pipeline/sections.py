@@ -6,6 +6,7 @@ from __future__ import annotations
 from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
+from glimpse.fit.config import FitConfig
 from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -13,4 +14,5 @@ SECTION_CONFIGS: dict[str, type] = {
     "body": BodyConfig,
     "render": RenderConfig,
     "01_sfm": CamerasConfig,
+    "02_smpl_fit": FitConfig,
 }

@@ -46,7 +46,6 @@ STAGES: tuple[StageSpec, ...] = (
         upstream=("01_sfm",),
         shared=("compute", "body"),
         scene_inputs=("scene.yaml", *_PERSON_2D, *_PERSON_3D),
-        issue="#7 (stage 02: fit the body to each person)",
     ),
     StageSpec(
         "03_masks",
