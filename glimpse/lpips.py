@@ -109,6 +109,20 @@ def _load_conv(conv: nn.Conv2d, flax_conv: Mapping[str, np.ndarray], where: str)
             conv.bias.copy_(torch.from_numpy(np.asarray(flax_conv["bias"])))
 
 
+def _conv_relu_taps(x: Tensor, convs: nn.ModuleList, pool_before, pool_kernel: int, pool_stride: int,
+                    taps_at) -> list[Tensor]:
+    """Run conv+ReLU layers (max-pooling before the layers in ``pool_before``) and return the
+    activations after the layers in ``taps_at``."""
+    taps = []
+    for index, conv in enumerate(convs):
+        if index in pool_before:
+            x = F.max_pool2d(x, pool_kernel, pool_stride)
+        x = F.relu(conv(x))
+        if index in taps_at:
+            taps.append(x)
+    return taps
+
+
 class AlexNetFeatures(nn.Module):
     """torchvision's AlexNet ``features`` up to relu5; forward returns the 5 relu outputs."""
 
@@ -123,14 +137,7 @@ class AlexNetFeatures(nn.Module):
 
     def forward(self, x: Tensor) -> list[Tensor]:
         """x: ``[N, 3, H, W]`` (LPIPS-scaled); returns ``[N, C_k, H_k, W_k]`` for each tap."""
-        taps = []
-        for index, conv in enumerate(self.convs):
-            if index in ALEX_POOL_BEFORE:
-                x = F.max_pool2d(x, ALEX_POOL_KERNEL, ALEX_POOL_STRIDE)
-            x = F.relu(conv(x))
-            if index in ALEX_TAPS:
-                taps.append(x)
-        return taps
+        return _conv_relu_taps(x, self.convs, ALEX_POOL_BEFORE, ALEX_POOL_KERNEL, ALEX_POOL_STRIDE, ALEX_TAPS)
 
 
 class VGG16Features(nn.Module):
@@ -150,14 +157,7 @@ class VGG16Features(nn.Module):
 
     def forward(self, x: Tensor) -> list[Tensor]:
         """x: ``[N, 3, H, W]`` (LPIPS-scaled); returns ``[N, C_k, H_k, W_k]`` for each tap."""
-        taps = []
-        for index, conv in enumerate(self.convs):
-            if index in self.pool_before:
-                x = F.max_pool2d(x, VGG_POOL, VGG_POOL)
-            x = F.relu(conv(x))
-            if index in VGG_TAPS:
-                taps.append(x)
-        return taps
+        return _conv_relu_taps(x, self.convs, self.pool_before, VGG_POOL, VGG_POOL, VGG_TAPS)
 
 
 class LPIPS(nn.Module):
