@@ -69,18 +69,6 @@ def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, o
     return written
 
 
-def frame_files(frames_dir: Path) -> dict[int, Path]:
-    """Stage 01's frames folder -> frame id -> image path."""
-    from glimpse.io.images import parse_frame_name
-
-    result = {}
-    for path in sorted(frames_dir.iterdir()):
-        fid = parse_frame_name(path.stem)
-        if fid is not None:
-            result[fid] = path
-    return result
-
-
 def grey(path: Path) -> np.ndarray:
     """An image as (H, W) uint8 grey."""
     return cv2.cvtColor(read_rgb(path), cv2.COLOR_RGB2GRAY)
