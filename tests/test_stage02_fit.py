@@ -1,12 +1,19 @@
-"""Stage 02 (provided mode so far): body parameters for the pipeline's frames, keypoint residuals."""
+"""Stage 02 end to end on fixture scenes: provided parameters, fits to 3D and 2D keypoints, frames
+where a person is absent, the overlay video, and the errors a user can meet."""
 
 import numpy as np
 import pytest
 
+from glimpse.body.model import BodyModel
 from glimpse.body.params import read_body_params
-from glimpse.errors import GlimpseError, NotImplementedStageError
-from glimpse.fixtures.scenes import KEYPOINT_NOISE_2D_PX_AT_320, KEYPOINT_NOISE_3D_M, make_scene
+from glimpse.errors import GlimpseError
+from glimpse.fit.evaluate import joint_errors
+from glimpse.fixtures.scenes import FREE_BODY, KEYPOINT_NOISE_2D_PX_AT_320, KEYPOINT_NOISE_3D_M, make_scene
+from glimpse.io.images import read_mask, read_rgb
+from glimpse.io.video import read_mp4
 from tests.stage_helpers import read_json, run
+
+FAST = "02_smpl_fit.full_iterations=40 02_smpl_fit.global_iterations=20"
 
 
 @pytest.fixture(scope="module")
@@ -15,6 +22,17 @@ def demo(tmp_path_factory):
     scene = make_scene("demo", root / "demo", "tiny", seed=1)
     run("01_sfm", scene, root / "out")
     return scene, root / "out", run("02_smpl_fit", scene, root / "out")
+
+
+@pytest.fixture(scope="module")
+def model():
+    import torch
+
+    return BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+
+
+def _truth(scene, pid):
+    return dict(np.load(scene.with_name(scene.name + ".groundtruth") / f"{pid}_body.npz"))
 
 
 def test_provided_parameters_are_kept_for_the_frames_with_a_camera(demo):
@@ -35,20 +53,92 @@ def test_residuals_match_the_keypoint_noise(demo):
     assert report["mode"] == "provided" and len(report["per_frame"]) == 6
     expected_3d = KEYPOINT_NOISE_3D_M * np.sqrt(8 / np.pi)
     expected_2d = KEYPOINT_NOISE_2D_PX_AT_320 * 64 / 320 * np.sqrt(np.pi / 2)
-    assert report["keypoints3d_residual"]["mean"] == pytest.approx(expected_3d, rel=0.35)
-    assert report["keypoints2d_residual"]["mean"] == pytest.approx(expected_2d, rel=0.5)
+    assert report["keypoints3d_residual_m"]["mean"] == pytest.approx(expected_3d, rel=0.35)
+    assert report["keypoints2d_residual_px"]["mean"] == pytest.approx(expected_2d, rel=0.5)
 
 
-def test_fitting_modes_stop_clearly_until_they_land(demo, tmp_path):
-    scene, out, _ = demo
-    with pytest.raises(NotImplementedStageError, match=r"person p0: stage 02 mode keypoints3d is not implemented yet"):
-        run("02_smpl_fit", scene, out, "02_smpl_fit.mode=keypoints3d")
-    bare = make_scene("sparse", tmp_path / "sparse", "tiny", seed=0)
-    (bare / "humans" / "p0" / "smpl.npz").unlink()
-    (bare / "humans" / "p0" / "keypoints3d.npz").unlink()
+@pytest.fixture(scope="module")
+def small_demo(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fit_small")
+    scene = make_scene("demo", root / "demo", "small", seed=2)
+    run("01_sfm", scene, root / "out")
+    return scene, root / "out"
+
+
+def test_keypoints3d_fit_is_within_3_cm_of_the_true_bodies(small_demo, model):
+    scene, out = small_demo
+    result = run("02_smpl_fit", scene, out, f"02_smpl_fit.mode=keypoints3d {FAST}")
+    for pid in ("p0", "p1"):
+        params = read_body_params(result / "humans" / pid / "body.npz")
+        errors = joint_errors(model, params, _truth(scene, pid))
+        assert errors["mpjpe_m"] < 0.03, (pid, errors)
+        report = read_json(result / "humans" / pid / "fit_report.json")
+        assert report["mode"] == "keypoints3d" and report["scale"] == 1.0 and not report["scale_fitted"]
+        assert [s["stage"] for s in report["stages"]] == ["global", "full_1", "full_2", "full_3"]
+        assert report["keypoints3d_residual_m"]["mean"] < 2 * KEYPOINT_NOISE_3D_M
+        frame = report["per_frame"]["000004"]
+        assert set(frame) == {"interpolated", "keypoints3d_m", "keypoints2d_px"}
+
+
+def test_keypoints2d_fit_is_within_10_cm_after_alignment_and_writes_the_overlay(small_demo, model):
+    scene, out = small_demo
+    result = run("02_smpl_fit", scene, out, f"02_smpl_fit.mode=keypoints2d {FAST}")
+    for pid in ("p0", "p1"):
+        params = read_body_params(result / "humans" / pid / "body.npz")
+        errors = joint_errors(model, params, _truth(scene, pid))
+        assert errors["sequence_aligned_m"] < 0.10, (pid, errors)
+        report = read_json(result / "humans" / pid / "fit_report.json")
+        assert report["keypoints2d_residual_px"]["mean"] < 1.5
+    # p0 enters the picture cut by the border: its first frames lack keypoints, so it has no body there
+    p0 = read_json(result / "humans" / "p0" / "fit_report.json")
+    assert p0["absent_frames"][:1] == ["000000"] and "000000" not in p0["per_frame"]
+    video = read_mp4(result / "overlay.mp4")
+    assert video.shape == (24, 96, 128, 3)
+    # the fitted bodies tint the people's pixels; elsewhere only video compression changes the frame
+    frame_id = "000012"
+    image = read_rgb(result.parent / "01_sfm" / "frames" / f"{frame_id}.png").astype(float)
+    people = read_mask(scene / "humans" / "p0" / "masks" / f"{frame_id}.png") | read_mask(
+        scene / "humans" / "p1" / "masks" / f"{frame_id}.png")
+    change = np.abs(video[12].astype(float) - image).mean(-1)
+    assert people.sum() > 50
+    assert np.median(change[people]) > 25 and np.median(change[people]) > 4 * np.median(change[~people])
+
+
+def test_unobserved_frames_are_interpolated_or_absent(tmp_path, model):
+    scene = make_scene("sparse", tmp_path / "sparse", "small", seed=0)  # frames 0, 10, 20 of 24
+    (scene / "humans" / "p0" / "smpl.npz").unlink()
+    data = dict(np.load(scene / "humans" / "p0" / "keypoints3d.npz"))
+    assert data["frame_ids"].tolist() == [0, 10, 20]
+    data["joints"][0, :, 3] = 0.0  # not seen in the first frame: absent there
+    np.savez(scene / "humans" / "p0" / "keypoints3d.npz", **data)
+    run("01_sfm", scene, tmp_path / "out")
+    result = run("02_smpl_fit", scene, tmp_path / "out", f"{FAST} 02_smpl_fit.max_interpolated_gap=10")
+    params = read_body_params(result / "humans" / "p0" / "body.npz")
+    assert params.frame_ids.tolist() == [10, 20] and not params.interpolated.any()
+    data["joints"][0, :, 3] = 1.0
+    data["joints"][1, :, 3] = 0.0  # seen at 0 and 20, not at 10: interpolated there
+    np.savez(scene / "humans" / "p0" / "keypoints3d.npz", **data)
+    result = run("02_smpl_fit", scene, tmp_path / "out", f"{FAST} 02_smpl_fit.max_interpolated_gap=20")
+    params = read_body_params(result / "humans" / "p0" / "body.npz")
+    assert params.frame_ids.tolist() == [0, 10, 20] and params.interpolated.tolist() == [False, True, False]
+    report = read_json(result / "humans" / "p0" / "fit_report.json")
+    assert report["interpolated_frames"] == ["000010"] and report["per_frame"]["000010"]["interpolated"]
+    errors = joint_errors(model, params, _truth(scene, "p0"))
+    assert errors["frames"] == 2 and errors["mpjpe_m"] < 0.04
+
+
+def test_a_person_without_usable_keypoints_stops_the_stage_clearly(tmp_path):
+    scene = make_scene("sparse", tmp_path / "sparse", "tiny", seed=0)
+    (scene / "humans" / "p0" / "smpl.npz").unlink()
+    data = dict(np.load(scene / "humans" / "p0" / "keypoints3d.npz"))
+    data["joints"][..., 3] = 0.2
+    np.savez(scene / "humans" / "p0" / "keypoints3d.npz", **data)
+    run("01_sfm", scene, tmp_path / "out")
+    with pytest.raises(GlimpseError, match=r"person p0: humans/p0/keypoints3d.npz has no frame with at least 5 "
+                                           r"keypoints of confidence >= 0.4"):
+        run("02_smpl_fit", scene, tmp_path / "out")
     with pytest.raises(GlimpseError, match=r"02_smpl_fit.mode=provided needs humans/p0/smpl.npz"):
-        run("01_sfm", bare, tmp_path / "out")
-        run("02_smpl_fit", bare, tmp_path / "out", "02_smpl_fit.mode=provided")
+        run("02_smpl_fit", scene, tmp_path / "out", "02_smpl_fit.mode=provided")
 
 
 def test_body_params_files_carry_their_version(tmp_path):

@@ -24,7 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from glimpse.errors import GlimpseError
 
-__all__ = ["BUILTIN_MOTIONS", "SMPL_BODY_JOINTS", "BodySequence", "builtin_motion", "load_motion", "resample"]
+__all__ = ["BUILTIN_MOTIONS", "SMPL_BODY_JOINTS", "BodySequence", "builtin_motion", "interpolate_pose_sequence",
+           "load_motion", "resample"]
 
 log = logging.getLogger("glimpse")
 
@@ -228,19 +229,28 @@ def resample(sequence: BodySequence, fps: float) -> BodySequence:
 def _interpolate(sequence: BodySequence, times_in: np.ndarray, times_out: np.ndarray) -> dict:
     """Rotations slerped and translations lerped from samples at ``times_in`` (s, increasing)
     to ``times_out`` (s, inside their span). Returns global_orient, body_pose, transl arrays."""
+    return interpolate_pose_sequence(times_in, sequence.global_orient, sequence.body_pose, sequence.transl,
+                                     times_out)
+
+
+def interpolate_pose_sequence(times_in: np.ndarray, global_orient: np.ndarray, body_pose: np.ndarray,
+                              transl: np.ndarray, times_out: np.ndarray) -> dict[str, np.ndarray]:
+    """Body parameters sampled at ``times_in`` (increasing) at ``times_out`` (inside their span; any
+    unit): every joint rotation slerped along the shortest arc, translations lerped.
+    global_orient [N, 3], body_pose [N, 69], transl [N, 3] -> the same keys with M = len(times_out) rows."""
     n_in, n_out, joints = len(times_in), len(times_out), N_BODY_JOINTS + 1
     if n_in == 1:
-        return {"global_orient": np.repeat(sequence.global_orient, n_out, 0),
-                "body_pose": np.repeat(sequence.body_pose, n_out, 0), "transl": np.repeat(sequence.transl, n_out, 0)}
+        return {"global_orient": np.repeat(global_orient, n_out, 0), "body_pose": np.repeat(body_pose, n_out, 0),
+                "transl": np.repeat(transl, n_out, 0)}
     lower = np.clip(np.searchsorted(times_in, times_out, side="right") - 1, 0, n_in - 2)
     alpha = np.clip((times_out - times_in[lower]) / (times_in[lower + 1] - times_in[lower]), 0.0, 1.0)
-    rotvecs = np.concatenate([sequence.global_orient, sequence.body_pose], axis=1).reshape(n_in, joints, 3)
+    rotvecs = np.concatenate([global_orient, body_pose], axis=1).reshape(n_in, joints, 3)
     start = Rotation.from_rotvec(rotvecs[lower].reshape(-1, 3))
     end = Rotation.from_rotvec(rotvecs[lower + 1].reshape(-1, 3))
     step = (start.inv() * end).as_rotvec() * np.repeat(alpha, joints)[:, None]  # shortest arc, scaled
     rotations = (start * Rotation.from_rotvec(step)).as_rotvec().reshape(n_out, 3 * joints)
-    transl = (1 - alpha)[:, None] * sequence.transl[lower] + alpha[:, None] * sequence.transl[lower + 1]
-    return {"global_orient": rotations[:, :3], "body_pose": rotations[:, 3:], "transl": transl}
+    lerped = (1 - alpha)[:, None] * transl[lower] + alpha[:, None] * transl[lower + 1]
+    return {"global_orient": rotations[:, :3], "body_pose": rotations[:, 3:], "transl": lerped}
 
 
 # --- built-in motions ---------------------------------------------------------------------------------

@@ -25,6 +25,14 @@ class PinholeCamera:
         """(3,) camera centre in the world frame: -R^T t."""
         return -self.R.T @ self.t
 
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) world points -> ((N, 2) pixels, (N,) depth along the optical axis).
+        Points at or behind the camera get non-finite or meaningless pixels: check depth > 0."""
+        cam = points @ self.R.T + self.t
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pixels = cam[:, :2] / cam[:, 2:3] * [self.K[0, 0], self.K[1, 1]] + self.K[:2, 2]
+        return pixels, cam[:, 2]
+
 
 def default_intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
     """(3, 3) K with the given field of view across the larger image side, centred.

@@ -22,7 +22,7 @@ from glimpse.cameras.model import PinholeCamera, default_intrinsics
 from glimpse.cameras.motion import measure_camera_motion
 from glimpse.cameras.person_regions import PersonRegions, find_person_regions
 from glimpse.cameras.sfm import SfmOptions, run_sfm, triangulate_known_poses
-from glimpse.cameras.undistort import Undistorter
+from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name
 from glimpse.scene import Scene
@@ -117,10 +117,7 @@ def estimate_cameras(
         )
     frame_ids = select_frame_ids(scene.frame_ids, scene.fps, config.fps, config.max_frames)
     K_input = scene.cameras.K if scene.cameras is not None else None
-    undistorter = Undistorter(
-        K_input if K_input is not None else np.eye(3),
-        scene.cameras.dist if scene.cameras is not None else None, scene.width, scene.height,
-    )
+    undistorter = scene_undistorter(scene)
     frames = write_frames(scene, frame_ids, undistorter, frames_dir)
     regions = find_person_regions(
         scene, frame_ids, undistorter, config.person_mask_dilate, config.keypoint_min_confidence, config.keypoint_box_margin

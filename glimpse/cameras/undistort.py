@@ -46,3 +46,11 @@ class Undistorter:
             return xy
         out = cv2.undistortPoints(np.asarray(xy, np.float64).reshape(-1, 1, 2), self.K, self.dist, P=self.K)
         return out.reshape(-1, 2)
+
+
+def scene_undistorter(scene) -> Undistorter:
+    """The undistorter of a scene's input camera (the identity for a pinhole or camera-less scene).
+    scene: glimpse.scene.Scene."""
+    cameras = scene.cameras
+    return Undistorter(cameras.K if cameras is not None and cameras.K is not None else np.eye(3),
+                       cameras.dist if cameras is not None else None, scene.width, scene.height)

@@ -7,6 +7,26 @@ from typing import Literal
 
 
 @dataclass(frozen=True)
+class FitWeights:
+    keypoint_noise_m: float
+    robust_scale_m: float
+    pose_prior: float
+    joint_limits: float
+    shape_prior: float
+    accel_sigma_m_s2: float
+
+
+@dataclass(frozen=True)
 class FitConfig:
     mode: Literal["auto", "provided", "keypoints3d", "keypoints2d"]
     keypoint_min_confidence: float
+    min_keypoints: int
+    max_interpolated_gap: int
+    fit_scale: Literal["auto", "always", "never"]
+    weights: FitWeights
+    pose_prior_motions: list[str]
+    pose_prior_floor_deg: float
+    global_iterations: int
+    full_iterations: int
+    pose_prior_anneal: list[float]
+    overlay: bool

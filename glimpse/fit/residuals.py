@@ -43,9 +43,7 @@ def residuals_2d(predicted: dict[int, np.ndarray], frame_ids: np.ndarray, keypoi
         keep = obs[:, 2] >= min_confidence
         if fid not in predicted or fid not in cameras or not keep.any():
             continue
-        cam = cameras[fid]
-        points = predicted[fid] @ cam.R.T + cam.t
-        pixels = points[:, :2] / points[:, 2:3] * [cam.K[0, 0], cam.K[1, 1]] + cam.K[:2, 2]
+        pixels, _ = cameras[fid].project(predicted[fid])
         result[fid] = float(np.linalg.norm(pixels[keep] - obs[keep, :2], axis=1).mean())
     return result
 

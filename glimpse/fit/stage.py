@@ -1,25 +1,39 @@
-"""Stage 02's logic: one mode per person, ``provided`` > ``keypoints3d`` > ``keypoints2d``
-unless forced; body parameters for the frames the pipeline has (stage 01's cameras); the
-residuals against whatever keypoints the scene gives.
+"""Stage 02's logic: one mode per person, ``provided`` > ``keypoints3d`` > ``keypoints2d`` unless
+forced; body parameters for the frames the pipeline has (stage 01's cameras); the residuals
+against whatever keypoints the scene gives.
 
-Built so far: ``provided``. The fitting modes arrive with the rest of issue #7; a person
-that needs one stops the stage with a clear message (no output is faked).
+Frames: a fitting mode fits the frames with a camera where the person has at least
+``min_keypoints`` confident keypoints. Unobserved frames between two observed ones at most
+``max_interpolated_gap`` apart get interpolated parameters (``interpolated`` marks them); other
+unobserved frames get none (the person is absent there).
 """
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
+import numpy as np
+import torch
+
+from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
+from glimpse.body.motion import interpolate_pose_sequence
 from glimpse.body.params import BodyParams, read_scene_smpl
 from glimpse.cameras.model import PinholeCamera
-from glimpse.errors import GlimpseError, NotImplementedStageError
+from glimpse.cameras.undistort import scene_undistorter
+from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
+from glimpse.fit.objective import FitEnergy, FitState, Track
+from glimpse.fit.priors import PosePrior, build_pose_prior, joint_limits
 from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, summary
 from glimpse.io.images import frame_name
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
 
-FIT_MODES_PENDING = "issue #7 (fitting to 3D and 2D keypoints)"
+KEYPOINT_FILES = {"provided": "smpl.npz", "keypoints3d": "keypoints3d.npz", "keypoints2d": "keypoints2d.npz"}
 
 
 @dataclass
@@ -30,56 +44,190 @@ class PersonFit:
     report: dict
 
 
+class Fitter:
+    """What every person's fit shares: the body model, its keypoint bodies, the priors, the cameras."""
+
+    def __init__(self, scene: Scene, model: BodyModel, cameras: dict[int, PinholeCamera], config: FitConfig,
+                 units: str):
+        self.scene, self.model, self.cameras, self.config = scene, model, cameras, config
+        self.fit_scale = config.fit_scale == "always" or (config.fit_scale == "auto" and units == "sfm")
+        self.undistorter = scene_undistorter(scene)
+        self._bodies: dict[str, KeypointBody] = {}
+        self._prior: PosePrior | None = None
+
+    def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
+        """(frame_ids [T], layout, values [T, K, D+1]) of a person's 3D keypoints (world) or 2D keypoints
+        (pixels of the undistorted frames stage 01 writes), the last channel being confidence."""
+        if mode == "keypoints3d":
+            kp3 = read_keypoints3d(person.keypoints3d)
+            return kp3.frame_ids, kp3.layout, kp3.joints
+        kp2 = read_keypoints2d(person.keypoints2d)
+        values = kp2.keypoints.copy()
+        seen = values[..., 2] > 0
+        values[seen, :2] = self.undistorter.points(values[seen, :2])
+        return kp2.frame_ids, kp2.layout, values
+
+    def keypoint_body(self, layout: str) -> KeypointBody:
+        if layout not in self._bodies:
+            self._bodies[layout] = KeypointBody(self.model, keypoint_map(layout, self.model.data))
+        return self._bodies[layout]
+
+    @property
+    def prior(self) -> PosePrior:
+        if self._prior is None:
+            self._prior = build_pose_prior(self.config.pose_prior_motions, self.config.pose_prior_floor_deg,
+                                           self.model.dtype)
+        return self._prior
+
+    def image_keypoints(self, person: HumanInputs) -> tuple[np.ndarray, np.ndarray] | None:
+        """(frame_ids [T], [T, K, 3] pixel x, y, confidence) of a person's confident keypoints in the
+        undistorted frames: the 2D keypoints, else the 3D ones projected; None without either."""
+        if person.keypoints2d is not None:
+            frame_ids, _, values = self.observed(person, "keypoints2d")
+        elif person.keypoints3d is not None:
+            frame_ids, _, joints = self.observed(person, "keypoints3d")
+            values = np.zeros((*joints.shape[:2], 3))
+            for row, fid in enumerate(frame_ids):
+                if int(fid) in self.cameras:
+                    pixels, depth = self.cameras[int(fid)].project(joints[row, :, :3])
+                    values[row, :, :2] = np.where(depth[:, None] > 0, pixels, 0.0)
+                    values[row, :, 2] = np.where(depth > 0, joints[row, :, 3], 0.0)
+        else:
+            return None
+        values[..., 2] = np.where(values[..., 2] >= self.config.keypoint_min_confidence, values[..., 2], 0.0)
+        return frame_ids, values
+
+    # ------------------------------------------------------------------------------------------ per person
+
+    def fit_person(self, person: HumanInputs) -> PersonFit:
+        """Body parameters of one person over the frames that have a camera, with a residual report."""
+        mode = choose_mode(person, self.config)
+        started = time.perf_counter()
+        if mode == "provided":
+            params = read_scene_smpl(person.smpl, self.scene.body_model).select(sorted(self.cameras))
+            if len(params.frame_ids) == 0:
+                raise GlimpseError(f"person {person.pid}: smpl.npz has no frame among the {len(self.cameras)} "
+                                   f"frames with a camera")
+            fit_info: dict = {}
+        else:
+            params, fit_info = self._fit_keypoints(person, mode)
+        report = self.residual_report(person, params, mode)
+        report.update(fit_info)
+        report["seconds"] = round(time.perf_counter() - started, 3)
+        return PersonFit(person.pid, mode, params, report)
+
+    def residual_report(self, person: HumanInputs, params: BodyParams, mode: str) -> dict:
+        """Per-frame mean keypoint residuals of ``params`` against the scene's 3D (world units) and 2D
+        (pixels) keypoints; interpolated frames are listed too (they were not fitted to those keypoints)."""
+        report: dict = {"format": "glimpse-fit-report/1", "person": person.pid, "mode": mode,
+                        "frames": len(params.frame_ids), "units_3d": "world units (metres in a metric frame)"}
+        per_frame: dict[int, dict] = {int(f): {"interpolated": bool(i)}
+                                      for f, i in zip(params.frame_ids, params.interpolated)}
+        min_confidence = self.config.keypoint_min_confidence
+        for key, path, unit in (("keypoints3d", person.keypoints3d, "m"), ("keypoints2d", person.keypoints2d, "px")):
+            if path is None:
+                continue
+            frame_ids, layout, values = self.observed(person, key)
+            predicted = dict(zip(params.frame_ids.tolist(), body_keypoints(self.model, params, layout)))
+            if key == "keypoints3d":
+                residuals = residuals_3d(predicted, frame_ids, values, min_confidence)
+            else:
+                residuals = residuals_2d(predicted, frame_ids, values, self.cameras, min_confidence)
+            report[f"{key}_residual_{unit}"] = summary(residuals)
+            for fid, value in residuals.items():
+                per_frame[fid][f"{key}_{unit}"] = value
+        report["per_frame"] = {frame_name(f): v for f, v in sorted(per_frame.items())}
+        return report
+
+    def _fit_keypoints(self, person: HumanInputs, mode: str) -> tuple[BodyParams, dict]:
+        who, file = f"person {person.pid}", f"humans/{person.pid}/{KEYPOINT_FILES[mode]}"
+        track, layout = self._track(person, mode)
+        body = self.keypoint_body(layout)
+        energy = FitEnergy(body, track, self.prior, joint_limits(self.model.dtype), self.config.weights,
+                           self.config.max_interpolated_gap)
+        if not track.is_2d:
+            initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
+        elif person.keypoints3d is not None:
+            initial = self._initial_from_3d(person, track, body)
+        else:
+            initial = initial_state_2d(body, track, self.prior.mean)
+        c = self.config
+        schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal), self.fit_scale)
+        try:
+            outcome = fit_track(energy, initial, schedule, who)
+        except GlimpseError as exc:
+            raise GlimpseError(f"{exc} ({file})") from None
+        params = self._with_gaps_filled(outcome, track.frame_ids.numpy())
+        scale = params.scale
+        info = {"layout": layout, "fitted_frames": len(track.frame_ids),
+                "interpolated_frames": [frame_name(int(f)) for f in params.frame_ids[params.interpolated]],
+                "absent_frames": [frame_name(f) for f in sorted(self.cameras) if f not in set(params.frame_ids)],
+                "scale_fitted": self.fit_scale, "scale": scale, "metres_per_unit": 1.0 / scale,
+                "pose_prior": self.prior.description, "stages": outcome.stages}
+        return params, info
+
+    def _track(self, person: HumanInputs, mode: str) -> tuple[Track, str]:
+        """The person's confident keypoints on the frames with a camera and enough of them."""
+        c, dtype = self.config, self.model.dtype
+        all_ids, layout, values = self.observed(person, mode)
+        confidence = np.where(values[..., -1] >= c.keypoint_min_confidence, values[..., -1], 0.0)
+        keep = np.isin(all_ids, list(self.cameras)) & ((confidence > 0).sum(1) >= c.min_keypoints)
+        if not keep.any():
+            raise GlimpseError(
+                f"person {person.pid}: humans/{person.pid}/{KEYPOINT_FILES[mode]} has no frame with at least "
+                f"{c.min_keypoints} keypoints of confidence >= {c.keypoint_min_confidence} among the "
+                f"{len(self.cameras)} frames with a camera; lower 02_smpl_fit.min_keypoints or "
+                f"keypoint_min_confidence, or give humans/{person.pid}/smpl.npz")
+        frame_ids = all_ids[keep]
+        order = np.argsort(frame_ids)
+        frame_ids, points, weight = frame_ids[order], values[keep][order, :, :-1], confidence[keep][order]
+        cams = {}
+        if mode == "keypoints2d":
+            cams = {name: torch.as_tensor(np.stack([getattr(self.cameras[int(f)], name) for f in frame_ids]),
+                                          dtype=dtype) for name in ("K", "R", "t")}
+        track = Track(torch.as_tensor(frame_ids), torch.as_tensor(frame_ids / self.scene.fps, dtype=dtype),
+                      torch.as_tensor(points, dtype=dtype), torch.as_tensor(weight, dtype=dtype), **cams)
+        return track, layout
+
+    def _initial_from_3d(self, person: HumanInputs, track: Track, body: KeypointBody) -> FitState:
+        """A 2D fit starting from the 3D keypoints' placement (frames without them copy the nearest)."""
+        track3d, layout = self._track(person, "keypoints3d")
+        common = np.isin(track3d.frame_ids.numpy(), track.frame_ids.numpy())
+        if not common.any():
+            return initial_state_2d(body, track, self.prior.mean)
+        rows = np.searchsorted(track3d.frame_ids.numpy()[common], track.frame_ids.numpy()).clip(0, common.sum() - 1)
+        subset = Track(track.frame_ids, track.times_s, track3d.points[common][rows], track3d.weight[common][rows])
+        return initial_state_3d(self.keypoint_body(layout), subset, self.prior.mean, self.fit_scale)
+
+    def _with_gaps_filled(self, outcome: FitOutcome, fitted_ids: np.ndarray) -> BodyParams:
+        state = outcome.state
+        go, bp, tr = (x.numpy() for x in (state.global_orient, state.body_pose, state.transl))
+        camera_ids = np.array(sorted(self.cameras))
+        position = np.searchsorted(fitted_ids, camera_ids)
+        inside = (position > 0) & (position < len(fitted_ids))
+        before, after = fitted_ids[np.clip(position - 1, 0, None)], fitted_ids[np.clip(position, None, len(fitted_ids) - 1)]
+        gap_ok = inside & (after - before <= self.config.max_interpolated_gap)
+        wanted = np.isin(camera_ids, fitted_ids) | gap_ok
+        out_ids = camera_ids[wanted]
+        filled = interpolate_pose_sequence(fitted_ids.astype(float), go, bp, tr, out_ids.astype(float))
+        interpolated = ~np.isin(out_ids, fitted_ids)
+        return BodyParams(out_ids.astype(np.int64), state.betas.numpy().copy(), filled["global_orient"],
+                          filled["body_pose"], filled["transl"], float(math.exp(float(state.log_scale))),
+                          self.scene.body_model, interpolated)
+
+
 def choose_mode(person: HumanInputs, config: FitConfig) -> str:
     available = [m for m, path in (("provided", person.smpl), ("keypoints3d", person.keypoints3d),
                                    ("keypoints2d", person.keypoints2d)) if path is not None]
     if config.mode != "auto":
         if config.mode not in available:
             raise GlimpseError(f"person {person.pid}: 02_smpl_fit.mode={config.mode} needs "
-                               f"humans/{person.pid}/{_file_of(config.mode)}; the scene has: {', '.join(available) or 'none'}")
+                               f"humans/{person.pid}/{KEYPOINT_FILES[config.mode]}; the scene has: "
+                               f"{', '.join(available) or 'none'}")
         return config.mode
     if not available:
         raise GlimpseError(f"person {person.pid}: no smpl.npz, keypoints3d.npz or keypoints2d.npz to fit a body to "
                            f"(masks alone do not give a body)")
     return available[0]
 
-
-def _file_of(mode: str) -> str:
-    return {"provided": "smpl.npz", "keypoints3d": "keypoints3d.npz", "keypoints2d": "keypoints2d.npz"}[mode]
-
-
-def fit_person(scene: Scene, person: HumanInputs, model: BodyModel, cameras: dict[int, PinholeCamera],
-               config: FitConfig) -> PersonFit:
-    """Body parameters of one person over the frames that have a camera, with a residual report."""
-    mode = choose_mode(person, config)
-    if mode != "provided":
-        raise NotImplementedStageError(
-            f"person {person.pid}: stage 02 mode {mode} is not implemented yet (it arrives with {FIT_MODES_PENDING}); "
-            f"give humans/{person.pid}/smpl.npz to use the provided parameters")
-    params = read_scene_smpl(person.smpl, scene.body_model).select(sorted(cameras))
-    if len(params.frame_ids) == 0:
-        raise GlimpseError(f"person {person.pid}: smpl.npz has no frame among the {len(cameras)} frames with a camera")
-    return PersonFit(person.pid, mode, params, _report(person, model, params, cameras, config, mode))
-
-
-def _report(person: HumanInputs, model: BodyModel, params: BodyParams, cameras: dict[int, PinholeCamera],
-            config: FitConfig, mode: str) -> dict:
-    report: dict = {"format": "glimpse-fit-report/1", "person": person.pid, "mode": mode,
-                    "frames": len(params.frame_ids), "units_3d": "world units (metres in a metric frame)"}
-    per_frame: dict[int, dict] = {int(f): {} for f in params.frame_ids}
-    for layout_source, key in ((person.keypoints3d, "keypoints3d"), (person.keypoints2d, "keypoints2d")):
-        if layout_source is None:
-            continue
-        observed = read_keypoints3d(layout_source) if key == "keypoints3d" else read_keypoints2d(layout_source)
-        predicted = dict(zip(params.frame_ids.tolist(), body_keypoints(model, params, observed.layout)))
-        if key == "keypoints3d":
-            values = residuals_3d(predicted, observed.frame_ids, observed.joints, config.keypoint_min_confidence)
-        else:
-            values = residuals_2d(predicted, observed.frame_ids, observed.keypoints, cameras,
-                                  config.keypoint_min_confidence)
-        report[f"{key}_residual"] = summary(values)
-        for fid, value in values.items():
-            per_frame.setdefault(fid, {})[key] = value
-    report["per_frame"] = {frame_name(f): v for f, v in sorted(per_frame.items())}
-    return report
 

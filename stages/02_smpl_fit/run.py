@@ -1,16 +1,20 @@
 """Stage 02: body parameters of each person per frame, in the stage-01 world frame.
 
-Inputs:  the scene (humans/<pid>/smpl.npz, keypoints3d.npz, keypoints2d.npz), 01_sfm/cameras.json.
+Inputs:  the scene (humans/<pid>/smpl.npz, keypoints3d.npz, keypoints2d.npz; frames for the overlay),
+         01_sfm/cameras.json and report.json (units).
 Params:  02_smpl_fit, body, compute (pipeline.yaml).
 Outputs (OUT/<scene>/02_smpl_fit/, CONTRACTS.md):
-  humans/<pid>/body.npz         glimpse-body-params/1 (betas, global_orient, body_pose, transl, scale, ...)
-  humans/<pid>/fit_report.json  glimpse-fit-report/1: mode, per-frame keypoint residuals (world units, pixels)
-Modes per person: provided (built); keypoints3d and keypoints2d fitting arrive with the rest of issue #7.
+  humans/<pid>/body.npz         glimpse-body-params/1 (betas, global_orient, body_pose, transl, scale, interpolated)
+  humans/<pid>/fit_report.json  glimpse-fit-report/1: mode, fit stages, per-frame keypoint residuals (m, px)
+  overlay.mp4                   the fitted bodies over the input frames (02_smpl_fit.overlay)
+Modes per person: provided > keypoints3d > keypoints2d unless 02_smpl_fit.mode forces one (glimpse/fit/).
 """
 
 import json
 import sys
 from pathlib import Path
+
+from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
@@ -20,7 +24,8 @@ from glimpse.body.params import BODY_PARAMS_FORMAT, write_body_params  # noqa: E
 from glimpse.compute import ComputeConfig, apply_compute  # noqa: E402
 from glimpse.config import config_from_mapping  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.stage import fit_person  # noqa: E402
+from glimpse.fit.stage import Fitter  # noqa: E402
+from glimpse.fit.video import write_overlay_video  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
@@ -33,22 +38,35 @@ def run(ctx: StageContext) -> None:
     body = config_from_mapping(BodyConfig, ctx.params["body"], "pipeline.yaml body")
     apply_compute(config_from_mapping(ComputeConfig, ctx.params["compute"], "pipeline.yaml compute"))
     scene = load_scene(ctx.scene_root)
-    _, _, cameras = read_cameras_json(ctx.upstream_dir("01_sfm") / "cameras.json")
+    cameras_dir = ctx.upstream_dir("01_sfm")
+    _, _, cameras = read_cameras_json(cameras_dir / "cameras.json")
+    units = json.loads((cameras_dir / "report.json").read_text())["units"]
     import torch
 
     model = BodyModel.from_file(resolve_model_path(body), dtype=torch.float64)
-    modes = {}
-    for pid, person in sorted(scene.humans.items()):
+    fitter = Fitter(scene, model, cameras, config, units)
+    fits = []
+    for pid, person in tqdm(sorted(scene.humans.items()), desc="02_smpl_fit people", unit="person"):
         with ctx.timed(f"fit_{pid}"):
-            fit = fit_person(scene, person, model, cameras, config)
+            fit = fitter.fit_person(person)
         folder = ctx.out / "humans" / pid
         folder.mkdir(parents=True)
         write_body_params(folder / "body.npz", fit.params)
         (folder / "fit_report.json").write_text(json.dumps(fit.report, indent=1) + "\n")
         ctx.formats[f"humans/{pid}/body.npz"] = BODY_PARAMS_FORMAT
         ctx.formats[f"humans/{pid}/fit_report.json"] = fit.report["format"]
-        modes[pid] = fit.mode
-    ctx.summary["modes"] = modes
+        fits.append(fit)
+    if config.overlay:
+        with ctx.timed("overlay"):
+            keypoints = {pid: kp for pid, person in scene.humans.items()
+                         if (kp := fitter.image_keypoints(person)) is not None}
+            write_overlay_video(ctx.out / "overlay.mp4", scene, model, cameras, fits, cameras_dir / "frames",
+                                keypoints)
+        ctx.formats["overlay.mp4"] = "mp4/h264"
+    ctx.summary["modes"] = {fit.pid: fit.mode for fit in fits}
+    ctx.summary["keypoint_residuals"] = {
+        fit.pid: {k: v["mean"] for k, v in fit.report.items() if k.endswith(("_residual_m", "_residual_px")) and v}
+        for fit in fits}
 
 
 if __name__ == "__main__":

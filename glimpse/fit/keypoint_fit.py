@@ -1,0 +1,217 @@
+"""Fitting one person's body to keypoints over time: an initial guess, a global stage, a full stage.
+
+1. Initial guess, per frame. 3D: the similarity (rotation, translation, and scale where fitted)
+   that best maps the standing body's torso keypoints (shoulders, hips) onto the observed ones
+   (Umeyama). 2D: a standing body facing the camera, turned around when the person's left
+   shoulder and hip appear on the image's left (the person faces away); its depth from the
+   keypoints' spread in pixels against the body's spread in metres; placed on the ray through
+   the keypoints' centre. Pose: the pose prior's mean; betas 0.
+2. Global stage: orientation, translation (and scale) against the torso keypoints only.
+3. Full stage: everything, with the priors; the pose prior's weight annealed from strong to
+   its final value (SMPLify), each step minimised by L-BFGS with a strong-Wolfe line search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+from torch import Tensor
+
+from glimpse.cameras.align import umeyama
+from glimpse.errors import GlimpseError
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.objective import FitEnergy, FitState, Track
+
+TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
+HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")  # tell which way a profile faces
+YAW_HYPOTHESES_DEG = (0.0, 90.0, 180.0, 270.0)  # 2D global stage: turns about the body's up axis tried
+LEFT_RIGHT_PAIRS = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"))
+LBFGS_HISTORY = 20
+
+
+@dataclass(frozen=True)
+class FitSchedule:
+    global_iterations: int  # L-BFGS iterations of the global stage
+    full_iterations: int  # L-BFGS iterations per annealing step of the full stage
+    pose_prior_anneal: tuple[float, ...]  # multipliers of the pose-prior weight, one per step, last = 1
+    fit_scale: bool  # optimise the person's scale (world units per metre): frames in SfM units
+
+
+@dataclass
+class FitOutcome:
+    state: FitState
+    stages: list[dict]  # per stage: name, iterations, energy terms at its end
+
+
+def _torso_indices(body: KeypointBody) -> list[int]:
+    missing = [name for name in TORSO if name not in body.names]
+    if missing:
+        raise GlimpseError(f"layout {body.layout} lacks the torso keypoints {missing} the fit starts from")
+    return [body.names.index(name) for name in TORSO]
+
+
+def _global_indices(body: KeypointBody) -> list[int]:
+    return _torso_indices(body) + [body.names.index(name) for name in HEAD if name in body.names]
+
+
+def _rest(body: KeypointBody, pose: Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Keypoints [K, 3] and root joint [3] of the mean-shape body in ``pose`` [69], unrotated, at the origin."""
+    zero = torch.zeros(1, 3, dtype=pose.dtype)
+    with torch.no_grad():
+        out = body(torch.zeros(10, dtype=pose.dtype), zero, pose[None], zero, torch.ones((), dtype=pose.dtype))
+    return out.keypoints[0].numpy(), out.joints[0, 0].numpy()
+
+
+def _transl_placing(rotation: np.ndarray, scale: float, root: np.ndarray, point_body: np.ndarray,
+                    point_world: np.ndarray) -> np.ndarray:
+    """transl that puts body-frame ``point_body`` at ``point_world`` (the root turns about itself:
+    x_world = scale * (rotation @ (x - root) + root) + transl)."""
+    return point_world - scale * (rotation @ (point_body - root) + root)
+
+
+def _nearest_filled(values: list, default):
+    """Fill None entries from the nearest frame that has a value (default where none has)."""
+    known = [i for i, v in enumerate(values) if v is not None]
+    if not known:
+        return [default] * len(values)
+    return [v if v is not None else values[min(known, key=lambda k: abs(k - i))] for i, v in enumerate(values)]
+
+
+def initial_state_3d(body: KeypointBody, track: Track, pose: Tensor, fit_scale: bool) -> FitState:
+    torso = _torso_indices(body)
+    rest, root = _rest(body, pose)
+    points, weight = track.points.numpy(), track.weight.numpy()
+    solved: list = []
+    for t in range(len(points)):
+        seen = [k for k in torso if weight[t, k] > 0]
+        if len(seen) < 3:
+            seen = list(np.nonzero(weight[t] > 0)[0])
+        if len(seen) < 3:
+            solved.append(None)
+            continue
+        sim = umeyama(rest[seen], points[t, seen])
+        scale = sim.scale if fit_scale else 1.0
+        centre_body, centre_world = rest[seen].mean(0), points[t, seen].mean(0)
+        solved.append((sim.rotation, scale, _transl_placing(sim.rotation, scale, root, centre_body, centre_world)))
+    filled = _nearest_filled(solved, None)
+    if filled[0] is None:
+        raise GlimpseError("no frame has three keypoints to place the body from")
+    return _state(pose, [f[0] for f in filled], [f[2] for f in filled], float(np.median([f[1] for f in filled])))
+
+
+def initial_state_2d(body: KeypointBody, track: Track, pose: Tensor) -> FitState:
+    rest, root = _rest(body, pose)
+    points, weight = track.points.numpy(), track.weight.numpy()
+    K, R, t = track.K.numpy(), track.R.numpy(), track.t.numpy()
+    facing: list = []
+    for f in range(len(points)):
+        votes = [points[f, body.names.index(a), 0] - points[f, body.names.index(b), 0]
+                 for a, b in LEFT_RIGHT_PAIRS
+                 if weight[f, body.names.index(a)] > 0 and weight[f, body.names.index(b)] > 0]
+        facing.append(None if not votes else bool(np.sum(votes) >= 0))  # the person's left on the image right
+    facing = _nearest_filled(facing, True)
+    rotations, transls = [], []
+    for f in range(len(points)):
+        up, forward = -R[f][1], (-R[f][2] if facing[f] else R[f][2])  # body y = image up; body z = towards camera
+        rotation = np.stack([np.cross(up, forward), up, forward], axis=1)  # columns: body x, y, z in the world
+        seen = np.nonzero(weight[f] > 0)[0]
+        offsets = (R[f] @ rotation @ (rest[seen] - rest[seen].mean(0)).T).T[:, :2]  # metres, camera x-y
+        pixel_spread = np.sqrt(((points[f, seen] - points[f, seen].mean(0)) ** 2).sum(1).mean())
+        focal = 0.5 * (K[f, 0, 0] + K[f, 1, 1])
+        depth = focal * np.sqrt((offsets**2).sum(1).mean()) / max(pixel_spread, 1e-9)
+        ray = np.linalg.solve(K[f], np.append(points[f, seen].mean(0), 1.0))
+        centre_world = R[f].T @ (depth * ray - t[f])
+        rotations.append(rotation)
+        transls.append(_transl_placing(rotation, 1.0, root, rest[seen].mean(0), centre_world))
+    return _state(pose, rotations, transls, 1.0)
+
+
+def _state(pose: Tensor, rotations: list[np.ndarray], transls: list[np.ndarray], scale: float) -> FitState:
+    dtype, frames = pose.dtype, len(rotations)
+    return FitState(betas=torch.zeros(10, dtype=dtype),
+                    global_orient=torch.as_tensor(Rotation.from_matrix(np.stack(rotations)).as_rotvec(), dtype=dtype),
+                    body_pose=pose[None].repeat(frames, 1).clone(),
+                    transl=torch.as_tensor(np.stack(transls), dtype=dtype),
+                    log_scale=torch.tensor(float(np.log(scale)), dtype=dtype))
+
+
+def _minimise(energy: FitEnergy, state: FitState, names: list[str], iterations: int, who: str,
+              stage: str) -> dict:
+    """L-BFGS on the listed FitState fields; raises a clear error when the energy stops being finite."""
+    variables = [getattr(state, n).requires_grad_(True) for n in names]
+    optimiser = torch.optim.LBFGS(variables, lr=1.0, max_iter=iterations, history_size=LBFGS_HISTORY,
+                                  line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12)
+
+    def closure() -> Tensor:
+        optimiser.zero_grad()
+        value = energy(state)
+        if not torch.isfinite(value):
+            raise GlimpseError(f"{who}: the fit diverged (energy {float(value.detach())}) in its {stage} stage; "
+                               f"check the keypoints for outliers or the cameras from stage 01")
+        value.backward()
+        return value
+
+    optimiser.step(closure)
+    for n in names:
+        getattr(state, n).requires_grad_(False)
+        if not torch.isfinite(getattr(state, n)).all():
+            raise GlimpseError(f"{who}: the fit diverged (non-finite {n}) in its {stage} stage")
+    with torch.no_grad():
+        terms = {k: float(v) for k, v in energy.terms(state).items()}
+    return {"stage": stage, "iterations": int(optimiser.state[variables[0]]["n_iter"]), "energy": terms}
+
+
+def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> FitOutcome:
+    """Run the global and full stages from ``initial``; ``who`` names the person in errors."""
+    track = energy.track
+    energy.use_priors = False
+    if track.is_2d:
+        state, stage = _global_stage_2d(energy, initial, schedule, who)
+    else:
+        state = initial.detached()
+        energy.track = track.only(_global_indices(energy.body))
+        stage = _minimise(energy, state, ["global_orient", "transl", *_scale(schedule)], schedule.global_iterations,
+                          who, "global")
+    stages = [stage]
+    energy.track, energy.use_priors = track, True
+    for step, multiplier in enumerate(schedule.pose_prior_anneal):
+        energy.pose_prior_scale = multiplier
+        energy.update_depth_reference(state)
+        stages.append(_minimise(energy, state, ["betas", "global_orient", "body_pose", "transl", *_scale(schedule)],
+                                schedule.full_iterations, who, f"full_{step + 1}"))
+    return FitOutcome(state.detached(), stages)
+
+
+def _scale(schedule: FitSchedule) -> list[str]:
+    return ["log_scale"] if schedule.fit_scale else []
+
+
+def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> tuple[FitState, dict]:
+    """Each frame's body turned by every yaw hypothesis about its up axis, all minimised at once
+    (frames are independent here); per frame, the hypothesis that explains the torso and head best."""
+    track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(YAW_HYPOTHESES_DEG)
+    turned = []
+    for yaw in YAW_HYPOTHESES_DEG:
+        orient = Rotation.from_rotvec(initial.global_orient.numpy()) * Rotation.from_euler("y", yaw, degrees=True)
+        turned.append(torch.as_tensor(orient.as_rotvec(), dtype=initial.transl.dtype))
+    repeat = lambda x: x.repeat(hypotheses, *([1] * (x.ndim - 1)))  # noqa: E731
+    batch = FitState(initial.betas.clone(), torch.cat(turned), repeat(initial.body_pose), repeat(initial.transl),
+                     initial.log_scale.clone())
+    selected = track.only(_global_indices(energy.body))
+    energy.track = Track(repeat(track.frame_ids), repeat(track.times_s), repeat(selected.points),
+                         repeat(selected.weight), repeat(track.K), repeat(track.R), repeat(track.t))
+    energy.update_depth_reference(batch)
+    stage = _minimise(energy, batch, ["global_orient", "transl", *_scale(schedule)],
+                      schedule.global_iterations, who, "global")
+    with torch.no_grad():
+        per_frame = energy.data_per_frame(batch)
+    best = per_frame.reshape(hypotheses, frames).argmin(0)
+    rows = best * frames + torch.arange(frames)
+    state = FitState(initial.betas.clone(), batch.global_orient[rows].clone(), initial.body_pose.clone(),
+                     batch.transl[rows].clone(), batch.log_scale.detach().clone())
+    energy.track = track
+    stage["yaw_hypotheses_chosen_deg"] = [YAW_HYPOTHESES_DEG[int(i)] for i in best]
+    return state, stage

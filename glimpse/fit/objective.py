@@ -1,0 +1,146 @@
+"""The fitting energy of one person over T frames (SMPLify-style, in the spirit of a log posterior):
+
+    E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + smoothness
+
+- data: sum over confident keypoints of ``c * (rho^2 / sigma^2) * r^2 / (r^2 + rho^2)``, a Geman-McClure
+  robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
+  residual in metres at the person: the 3D distance, or the pixel distance times depth / focal length
+  (so 2D and 3D fits share sigma and rho, and a far person weighs as much as a near one).
+- smoothness: squared joint accelerations (second differences over the frames' times, seconds) over
+  ``sigma_acc^2``, between frames at most ``max_gap`` frames apart.
+Every term is a sum over frames (not a mean), so the priors weigh less where keypoints are many.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from glimpse.fit.config import FitWeights
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.priors import JointLimits, PosePrior, shape_energy
+
+MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
+
+
+@dataclass(frozen=True)
+class Track:
+    """One person's observations over T frames.
+    points [T, K, 3] world units (3D) or [T, K, 2] pixels (2D); weight [T, K] confidence, 0 = unused;
+    times_s [T] seconds; frame_ids [T] ints; for 2D, cameras K/R/t [T, 3, 3], [T, 3, 3], [T, 3]."""
+
+    frame_ids: Tensor
+    times_s: Tensor
+    points: Tensor
+    weight: Tensor
+    K: Tensor | None = None
+    R: Tensor | None = None
+    t: Tensor | None = None
+
+    @property
+    def is_2d(self) -> bool:
+        return self.points.shape[-1] == 2
+
+    def only(self, keypoints: list[int]) -> "Track":
+        """The same track with every other keypoint's weight set to 0."""
+        keep = torch.zeros(self.weight.shape[1], dtype=self.weight.dtype)
+        keep[keypoints] = 1.0
+        return Track(self.frame_ids, self.times_s, self.points, self.weight * keep, self.K, self.R, self.t)
+
+
+@dataclass
+class FitState:
+    """The unknowns: betas [10] (shared), global_orient [T, 3], body_pose [T, 69], transl [T, 3],
+    log_scale [] (world units per metre of body, log)."""
+
+    betas: Tensor
+    global_orient: Tensor
+    body_pose: Tensor
+    transl: Tensor
+    log_scale: Tensor
+
+    def detached(self) -> "FitState":
+        return FitState(*(v.detach().clone() for v in vars(self).values()))
+
+
+def project(points: Tensor, K: Tensor, R: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """points [T, N, 3] world -> (pixels [T, N, 2], depth [T, N]) through per-frame cameras."""
+    cam = torch.einsum("tij,tnj->tni", R, points) + t[:, None]
+    depth = cam[..., 2]
+    z = depth.clamp(min=MIN_CAMERA_DEPTH)
+    pixels = cam[..., :2] / z[..., None] * torch.stack([K[:, 0, 0], K[:, 1, 1]], -1)[:, None] + K[:, None, :2, 2]
+    return pixels, depth
+
+
+def keypoint_residual_m(keypoints: Tensor, track: Track, depth_ref: Tensor | None) -> Tensor:
+    """[T, K] residuals in metres at the person (see the module docstring). depth_ref [T] for 2D."""
+    if not track.is_2d:
+        return (keypoints - track.points).norm(dim=-1)
+    pixels, _ = project(keypoints, track.K, track.R, track.t)
+    focal = 0.5 * (track.K[:, 0, 0] + track.K[:, 1, 1])
+    return (pixels - track.points).norm(dim=-1) * (depth_ref / focal)[:, None]
+
+
+def data_energy(residual_m: Tensor, weight: Tensor, noise_m: float, robust_m: float) -> Tensor:
+    """residuals [T, K] metres, weights [T, K] -> [T] robust data energy per frame."""
+    squared = residual_m.square()
+    return (weight * (robust_m**2 / noise_m**2) * squared / (squared + robust_m**2)).sum(-1)
+
+
+def acceleration_energy(joints: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s2: float,
+                        max_gap_frames: int) -> Tensor:
+    """Squared second derivative of joint positions [T, J, 3] over times [T], over sigma^2."""
+    if len(times_s) < 3:
+        return joints.new_zeros(())
+    h1, h2 = (times_s[1:-1] - times_s[:-2]), (times_s[2:] - times_s[1:-1])
+    gaps = frame_ids[1:] - frame_ids[:-1]
+    keep = ((gaps[:-1] <= max_gap_frames) & (gaps[1:] <= max_gap_frames)).to(joints.dtype)
+    slope1 = (joints[1:-1] - joints[:-2]) / h1[:, None, None]
+    slope2 = (joints[2:] - joints[1:-1]) / h2[:, None, None]
+    accel = 2 * (slope2 - slope1) / (h1 + h2)[:, None, None]
+    return (keep[:, None] * accel.square().sum(-1)).sum() / sigma_m_s2**2
+
+
+class FitEnergy:
+    """E(state) for a person's track; ``terms`` returns each term (for the report), ``__call__`` the sum."""
+
+    def __init__(self, body: KeypointBody, track: Track, prior: PosePrior, limits: JointLimits,
+                 weights: FitWeights, max_gap_frames: int):
+        self.body, self.track, self.prior, self.limits, self.weights = body, track, prior, limits, weights
+        self.max_gap_frames = max_gap_frames  # smoothness links frames at most this far apart
+        self.depth_ref: Tensor | None = None  # [T] for 2D: set by update_depth_reference
+        self.pose_prior_scale = 1.0  # annealing multiplier
+        self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
+
+    def posed(self, state: FitState):
+        return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
+
+    def update_depth_reference(self, state: FitState) -> None:
+        """Depth of each frame's body (mean over its keypoints) in the camera, held fixed while minimising."""
+        if self.track.is_2d:
+            with torch.no_grad():
+                _, depth = project(self.posed(state).keypoints, self.track.K, self.track.R, self.track.t)
+                self.depth_ref = depth.mean(1).clamp(min=MIN_CAMERA_DEPTH)
+
+    def data_per_frame(self, state: FitState, keypoints: Tensor | None = None) -> Tensor:
+        """[T] data energy of each frame (keypoints [T, K, 3] when already posed)."""
+        keypoints = self.posed(state).keypoints if keypoints is None else keypoints
+        residual = keypoint_residual_m(keypoints, self.track, self.depth_ref)
+        return data_energy(residual, self.track.weight, self.weights.keypoint_noise_m, self.weights.robust_scale_m)
+
+    def terms(self, state: FitState) -> dict[str, Tensor]:
+        w = self.weights
+        out = self.posed(state)
+        terms = {"data": self.data_per_frame(state, out.keypoints).sum()}
+        if self.use_priors:
+            terms["pose_prior"] = w.pose_prior * self.pose_prior_scale * self.prior.energy(state.body_pose).sum()
+            terms["joint_limits"] = w.joint_limits * self.limits.energy(state.body_pose).sum()
+            terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
+            terms["smoothness"] = acceleration_energy(out.joints, self.track.times_s, self.track.frame_ids,
+                                                      w.accel_sigma_m_s2, self.max_gap_frames)
+        return terms
+
+    def __call__(self, state: FitState) -> Tensor:
+        return sum(self.terms(state).values())

@@ -1,0 +1,119 @@
+"""Offline priors for body fitting: no downloaded GMM or VPoser weights.
+
+- **Pose prior**: one Gaussian over the 69 body-pose numbers, fitted to the poses of the given
+  motions (the built-in procedural ones by default, plus any AMASS- or smplx-style .npz the user
+  lists) and their left-right mirror images, with an isotropic floor variance added so that poses
+  the motions never show stay reachable. Its energy is the squared Mahalanobis distance.
+  It knows only what those motions do: standing, walking, turning, waving, side steps.
+- **Joint limits**: the hinge joints (knees, elbows) bend one way only; a squared penalty on the
+  axis-angle components outside anatomical ranges (as SMPLify's angle prior, with bounds).
+- **Shape prior**: betas are unit-variance coefficients; energy ``|betas|^2``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from glimpse.body.motion import BUILTIN_MOTIONS, SMPL_BODY_JOINTS, builtin_motion, load_motion
+
+PRIOR_FPS = 30.0  # built-in motions are sampled at this rate ...
+PRIOR_SECONDS = 4.0  # ... over this long (a few cycles of each)
+_MIRROR_ROTVEC = np.array([1.0, -1.0, -1.0])  # reflection x -> -x of a rotation vector (body left = +x)
+
+# (joint, axis, lowest, highest) in degrees, SMPL local axes (y up, facing +z, left = +x).
+# Knee flexion is +x; left elbow flexion is -y, right +y (the forearm swings forward).
+JOINT_LIMITS_DEG: tuple[tuple[str, str, float, float], ...] = (
+    ("left_knee", "x", -5.0, 150.0), ("right_knee", "x", -5.0, 150.0),
+    ("left_knee", "y", -15.0, 15.0), ("right_knee", "y", -15.0, 15.0),
+    ("left_knee", "z", -15.0, 15.0), ("right_knee", "z", -15.0, 15.0),
+    ("left_elbow", "y", -150.0, 5.0), ("right_elbow", "y", -5.0, 150.0),
+    ("left_elbow", "z", -15.0, 15.0), ("right_elbow", "z", -15.0, 15.0),
+)
+
+
+def mirror_body_pose(body_pose: np.ndarray) -> np.ndarray:
+    """[N, 69] poses -> their left-right mirror images (joints swapped, rotations reflected in x)."""
+    joints = body_pose.reshape(len(body_pose), len(SMPL_BODY_JOINTS), 3)
+    index = {name: i for i, name in enumerate(SMPL_BODY_JOINTS)}
+    swap = [index[_other_side(name)] for name in SMPL_BODY_JOINTS]
+    return (joints[:, swap] * _MIRROR_ROTVEC).reshape(body_pose.shape)
+
+
+def _other_side(name: str) -> str:
+    for a, b in (("left_", "right_"), ("right_", "left_")):
+        if name.startswith(a):
+            return b + name[len(a):]
+    return name
+
+
+def motion_poses(sources: list[str]) -> np.ndarray:
+    """[N, 69] body poses of the listed motions: built-in names or paths of motion .npz files."""
+    poses = []
+    for source in sources:
+        if source in BUILTIN_MOTIONS:
+            poses.append(builtin_motion(source, int(PRIOR_FPS * PRIOR_SECONDS), PRIOR_FPS).body_pose)
+        else:
+            poses.append(load_motion(Path(source)).body_pose)
+    return np.concatenate(poses)
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """Gaussian pose prior. mean [69] radians; whitening [69, 69] with ``whitening.T @ whitening =
+    inverse covariance``; description says what it was fitted to."""
+
+    mean: Tensor
+    whitening: Tensor
+    description: str
+
+    def energy(self, body_pose: Tensor) -> Tensor:
+        """[T, 69] -> [T] squared Mahalanobis distance to the mean."""
+        return ((body_pose - self.mean) @ self.whitening.T).square().sum(-1)
+
+
+def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = torch.float64) -> PosePrior:
+    """Fit the Gaussian to the motions' poses and their mirror images; ``floor_deg`` is the
+    standard deviation of the isotropic variance added to every component."""
+    if not sources:
+        raise ValueError("build_pose_prior: name at least one motion")
+    poses = motion_poses(sources)
+    samples = np.concatenate([poses, mirror_body_pose(poses)])
+    mean = samples.mean(0)
+    covariance = np.cov(samples, rowvar=False) + math.radians(floor_deg) ** 2 * np.eye(samples.shape[1])
+    whitening = np.linalg.inv(np.linalg.cholesky(covariance))  # L^-1: |L^-1 x|^2 = x^T C^-1 x
+    description = (f"Gaussian over body_pose fitted to {len(samples)} poses of {', '.join(sources)} and their "
+                   f"mirror images, plus an isotropic {floor_deg} degree floor")
+    return PosePrior(torch.as_tensor(mean, dtype=dtype), torch.as_tensor(whitening, dtype=dtype), description)
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Box bounds on axis-angle components: index [L] into body_pose (69), low/high [L] radians."""
+
+    index: Tensor
+    low: Tensor
+    high: Tensor
+
+    def energy(self, body_pose: Tensor) -> Tensor:
+        """[T, 69] -> [T] sum of squared excursions outside the bounds (radians^2)."""
+        values = body_pose[:, self.index]
+        return ((self.low - values).clamp(min=0).square() + (values - self.high).clamp(min=0).square()).sum(-1)
+
+
+def joint_limits(dtype: torch.dtype = torch.float64) -> JointLimits:
+    joint_index = {name: i for i, name in enumerate(SMPL_BODY_JOINTS)}
+    index = [3 * joint_index[joint] + "xyz".index(axis) for joint, axis, _, _ in JOINT_LIMITS_DEG]
+    low = [math.radians(lo) for _, _, lo, _ in JOINT_LIMITS_DEG]
+    high = [math.radians(hi) for _, _, _, hi in JOINT_LIMITS_DEG]
+    return JointLimits(torch.tensor(index), torch.tensor(low, dtype=dtype), torch.tensor(high, dtype=dtype))
+
+
+def shape_energy(betas: Tensor) -> Tensor:
+    """[10] -> [] squared norm of the shape coefficients."""
+    return betas.square().sum()

@@ -1,0 +1,184 @@
+"""glimpse.fit's parts: the keypoint-only body, the offline priors, the energy terms, and fits to
+synthetic keypoints of known bodies (3D, and 2D through known cameras)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.body.keypoints import keypoint_map
+from glimpse.body.model import BodyModel
+from glimpse.body.motion import BUILTIN_MOTIONS, SMPL_BODY_JOINTS, builtin_motion
+from glimpse.body.params import BodyParams
+from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.errors import GlimpseError
+from glimpse.fit.config import FitConfig
+from glimpse.fit.evaluate import joint_errors
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.keypoint_fit import FitSchedule, fit_track, initial_state_2d, initial_state_3d
+from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
+from glimpse.fit.priors import build_pose_prior, joint_limits, mirror_body_pose, motion_poses
+from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
+
+F64 = torch.float64
+
+
+@pytest.fixture(scope="module")
+def model():
+    return BodyModel.from_file(FREE_BODY, dtype=F64)
+
+
+@pytest.fixture(scope="module")
+def config():
+    return config_from_mapping(FitConfig, load_pipeline_yaml()["02_smpl_fit"], "pipeline.yaml")
+
+
+@pytest.fixture(scope="module")
+def prior(config):
+    return build_pose_prior(config.pose_prior_motions, config.pose_prior_floor_deg)
+
+
+@pytest.mark.parametrize("layout", ["coco17", "openpose25"])
+def test_keypoint_body_equals_the_full_model(model, layout):
+    kmap = keypoint_map(layout, model.data)
+    body = KeypointBody(model, kmap)
+    g = torch.Generator().manual_seed(3)
+    betas, orient = torch.randn(10, generator=g, dtype=F64), torch.randn(4, 3, generator=g, dtype=F64)
+    pose, transl = 0.3 * torch.randn(4, 69, generator=g, dtype=F64), torch.randn(4, 3, generator=g, dtype=F64)
+    scale = torch.tensor(1.7, dtype=F64)
+    full = model(betas[None], orient, pose, transl, scale=scale)
+    fast = body(betas, orient, pose, transl, scale)
+    assert torch.allclose(fast.joints, full.joints, atol=1e-12)
+    assert torch.allclose(fast.keypoints, kmap(full.joints, full.vertices), atol=1e-6)  # metres
+
+
+def test_mirroring_a_pose_swaps_sides_and_is_its_own_inverse():
+    pose = np.zeros((1, 69))
+    knee = SMPL_BODY_JOINTS.index("left_knee")
+    pose[0, 3 * knee:3 * knee + 3] = [0.8, 0.1, -0.2]
+    mirrored = mirror_body_pose(pose)
+    right = SMPL_BODY_JOINTS.index("right_knee")
+    assert np.allclose(mirrored[0, 3 * right:3 * right + 3], [0.8, -0.1, 0.2])
+    assert np.count_nonzero(mirrored) == 3
+    walk = builtin_motion("walk", 30).body_pose
+    assert np.allclose(mirror_body_pose(mirror_body_pose(walk)), walk)
+
+
+def test_pose_prior_is_the_gaussian_of_the_motions(prior, config):
+    poses = motion_poses(config.pose_prior_motions)
+    samples = np.concatenate([poses, mirror_body_pose(poses)])
+    covariance = np.cov(samples.T) + math.radians(config.pose_prior_floor_deg) ** 2 * np.eye(69)
+    W = prior.whitening.numpy()
+    assert np.allclose(W.T @ W @ covariance, np.eye(69), atol=1e-8)
+    assert np.allclose(prior.mean.numpy(), samples.mean(0))
+    assert float(prior.energy(prior.mean[None])) == pytest.approx(0.0, abs=1e-12)
+    # bending the spine, which no motion does, costs at least (angle / floor)^2
+    odd = prior.mean.clone()
+    odd[3 * SMPL_BODY_JOINTS.index("spine1")] = 1.2
+    assert float(prior.energy(odd[None])) > 0.95 * (1.2 / math.radians(config.pose_prior_floor_deg)) ** 2
+    assert float(prior.energy(odd[None])) > float(prior.energy(torch.as_tensor(samples)).max())
+
+
+def test_joint_limits_accept_every_built_in_motion_and_refuse_bending_the_wrong_way():
+    limits = joint_limits()
+    for name in BUILTIN_MOTIONS:
+        assert float(limits.energy(torch.as_tensor(builtin_motion(name, 60).body_pose)).max()) == 0.0, name
+    for joint, axis_value in (("left_knee", (-0.5, 0, 0)), ("left_elbow", (0, 0.5, 0)), ("right_elbow", (0, -0.5, 0))):
+        pose = torch.zeros(1, 69, dtype=F64)
+        i = SMPL_BODY_JOINTS.index(joint)
+        pose[0, 3 * i:3 * i + 3] = torch.tensor(axis_value)
+        assert float(limits.energy(pose)) > 0.1, joint
+
+
+def test_acceleration_energy_of_a_uniformly_accelerated_point():
+    times = torch.tensor([0.0, 0.1, 0.3, 0.4, 0.6], dtype=F64)  # uneven spacing
+    accel, sigma = 3.0, 20.0
+    joints = torch.zeros(5, 24, 3, dtype=F64)
+    joints[..., 1] = 0.5 * accel * times[:, None] ** 2 + 0.7 * times[:, None]
+    energy = acceleration_energy(joints, times, torch.arange(5), sigma, max_gap_frames=10)
+    assert float(energy) == pytest.approx(3 * 24 * (accel / sigma) ** 2, rel=1e-9)
+    assert float(acceleration_energy(joints, times, torch.tensor([0, 1, 30, 31, 32]), sigma, 10)) == pytest.approx(
+        1 * 24 * (accel / sigma) ** 2, rel=1e-9)  # triples across a long gap are not linked
+
+
+def test_data_energy_is_quadratic_for_small_residuals_and_bounded_for_outliers():
+    weight = torch.ones(1, 2, dtype=F64)
+    small = data_energy(torch.tensor([[0.001, 0.002]], dtype=F64), weight, 0.02, 0.1)
+    assert float(small) == pytest.approx((0.001**2 + 0.002**2) / 0.02**2, rel=1e-3)
+    huge = data_energy(torch.tensor([[1e3, 1e6]], dtype=F64), weight, 0.02, 0.1)
+    assert float(huge) == pytest.approx(2 * (0.1 / 0.02) ** 2, rel=1e-5)
+
+
+# ------------------------------------------------------------------------------------- synthetic fits
+
+def _known_person(model, frames: int):
+    motion = builtin_motion("walk", frames, fps=10.0)
+    betas = np.linspace(-1.0, 1.0, 10)
+    yaw = np.radians(35.0)
+    orient = np.tile([0.0, yaw, 0.0], (frames, 1))  # turned, walking across
+    transl = motion.transl @ np.array([[np.cos(yaw), 0, -np.sin(yaw)], [0, 1, 0], [np.sin(yaw), 0, np.cos(yaw)]]).T
+    transl = transl + [0.3, 0.0, 3.0]
+    return BodyParams(np.arange(frames), betas, orient, motion.body_pose, transl, 1.0, "free", np.zeros(frames, bool))
+
+
+def _fit(model, config, prior, track, initial):
+    energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
+                       config.weights, config.max_interpolated_gap)
+    schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal), False)
+    return fit_track(energy, initial, schedule, "person test")
+
+
+def _as_params(outcome, frame_ids):
+    s = outcome.state
+    return BodyParams(frame_ids, s.betas.numpy(), s.global_orient.numpy(), s.body_pose.numpy(), s.transl.numpy(),
+                      float(s.log_scale.exp()), "free", np.zeros(len(frame_ids), bool))
+
+
+def _truth(params):
+    return {"frame_ids": params.frame_ids, "betas": params.betas, "global_orient": params.global_orient,
+            "body_pose": params.body_pose, "transl": params.transl}
+
+
+def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):
+    truth = _known_person(model, 10)
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    with torch.no_grad():
+        points = body(torch.as_tensor(truth.betas), torch.as_tensor(truth.global_orient),
+                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    track = Track(torch.arange(10), torch.arange(10, dtype=F64) / 10, points.keypoints, torch.ones(10, 17, dtype=F64))
+    outcome = _fit(model, config, prior, track, initial_state_3d(body, track, prior.mean, False))
+    errors = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))
+    assert errors["mpjpe_m"] < 0.02, errors
+    assert [s["stage"] for s in outcome.stages] == ["global", "full_1", "full_2", "full_3"]
+
+
+def test_fit_to_clean_2d_keypoints_recovers_the_body_up_to_depth(model, config, prior):
+    truth = _known_person(model, 10)
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    with torch.no_grad():
+        points = body(torch.as_tensor(truth.betas), torch.as_tensor(truth.global_orient),
+                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    K = intrinsics(320, 240, 60.0)
+    R, t = look_at_pose(np.array([0.0, 1.5, -1.0]), np.array([0.3, 1.0, 3.5]))
+    Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], 10, 0)) for a in (K, R, t))
+    cam = torch.einsum("ij,tkj->tki", Rs[0], points.keypoints) + ts[0]
+    pixels = cam[..., :2] / cam[..., 2:] * torch.tensor([K[0, 0], K[1, 1]]) + torch.as_tensor(K[:2, 2])
+    track = Track(torch.arange(10), torch.arange(10, dtype=F64) / 10, pixels, torch.ones(10, 17, dtype=F64),
+                  Ks, Rs, ts)
+    outcome = _fit(model, config, prior, track, initial_state_2d(body, track, prior.mean))
+    errors = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))
+    assert errors["sequence_aligned_m"] < 0.05, errors
+    assert errors["frame_aligned_m"] < 0.05, errors  # (as fitted, depth and body size trade off)
+
+
+def test_a_fit_that_diverges_stops_with_a_clear_message(model, config, prior):
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    points = torch.zeros(3, 17, 3, dtype=F64)
+    points[:, :, 0] = torch.linspace(0, 1, 17)
+    points[:, :, 1] = torch.linspace(0, 1, 17) ** 2
+    track = Track(torch.arange(3), torch.arange(3, dtype=F64), points, torch.ones(3, 17, dtype=F64))
+    initial = initial_state_3d(body, track, prior.mean, False)
+    initial.transl[1, 0] = float("nan")
+    with pytest.raises(GlimpseError, match=r"person test: the fit diverged .* in its global stage"):
+        _fit(model, config, prior, track, initial)
