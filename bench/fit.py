@@ -7,6 +7,12 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
   noisy-30%: the same with further keypoints dropped at random, 30% dropped in all
 Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes.
+
+Then "scenes not seen": `demo` and `crowd` with another seed (other looks and body shapes),
+2D keypoints only (mode auto), each person's pose prior fitted to the built-in motions other
+than the one that person performs (leave one out). Per person: sequence-aligned error, and how
+well the fitted bodies overlap the true ones in the input frames (silhouette IoU, all people
+rendered together by the fixtures' mesh renderer so each pixel belongs to the nearest body).
 """
 
 from __future__ import annotations
@@ -30,7 +36,8 @@ from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import joint_errors  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
-from glimpse.fixtures.scenes import FREE_BODY, KEYPOINT_DROP_RATE, make_scene  # noqa: E402
+from glimpse.fixtures.mesh_render import Mesh, render_meshes  # noqa: E402
+from glimpse.fixtures.scenes import FREE_BODY, KEYPOINT_DROP_RATE, SCENARIOS as FIXTURES, make_scene  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -39,6 +46,8 @@ SEED = 0
 SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "crowd")
 TOTAL_DROP = 0.3
 CONDITIONS = ("clean", "noisy", "noisy-30%")
+UNSEEN_SCENARIOS = ("demo", "crowd")
+UNSEEN_SEED = 7
 
 
 def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np.random.Generator) -> None:
@@ -65,15 +74,16 @@ def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np
             np.savez(person / name, **data)
 
 
-def evaluate(size: str, root: Path) -> list[dict]:
+def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
+             conditions: tuple[str, ...] = CONDITIONS) -> list[dict]:
     raw = load_pipeline_yaml()["02_smpl_fit"]
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
-    for scenario in SCENARIOS:
+    for scenario in scenarios:
         original = make_scene(scenario, root / f"{scenario}_{size}", size, seed=SEED)
         truth = original.with_name(original.name + ".groundtruth")
-        for condition in CONDITIONS:
+        for condition in conditions:
             scene_dir = root / f"{scenario}_{size}_{condition}"
             shutil.rmtree(scene_dir, ignore_errors=True)
             shutil.copytree(original, scene_dir)
@@ -92,12 +102,83 @@ def evaluate(size: str, root: Path) -> list[dict]:
     return rows
 
 
-def print_table(size: str, rows: list[dict]) -> None:
+def _silhouettes(model: BodyModel, bodies: list, camera, width: int, height: int) -> np.ndarray:
+    """[H, W] index of the body (in ``bodies``: (params, row) or None) owning each pixel, -1 for none."""
+    meshes, owners = [], []
+    for k, body in enumerate(bodies):
+        if body is None:
+            continue
+        params, row = body
+        with torch.no_grad():
+            vertices = model(torch.as_tensor(params["betas"])[None],
+                             torch.as_tensor(params["global_orient"][row:row + 1]),
+                             torch.as_tensor(params["body_pose"][row:row + 1]),
+                             torch.as_tensor(params["transl"][row:row + 1]),
+                             scale=float(params.get("scale", 1.0))).vertices[0].numpy()
+        meshes.append(Mesh(vertices, model.faces.numpy(), np.ones((len(vertices), 3))))
+        owners.append(k)
+    owner = render_meshes(meshes, camera.K, camera.R, camera.t, width, height, supersample=1).owner
+    return np.where(owner >= 0, np.asarray(owners + [-1])[owner], -1)
+
+
+def evaluate_unseen(size: str, root: Path) -> list[dict]:
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    rows = []
+    for scenario in UNSEEN_SCENARIOS:
+        scene_dir = make_scene(scenario, root / f"unseen_{scenario}_{size}", size, seed=UNSEEN_SEED)
+        truth_dir = scene_dir.with_name(scene_dir.name + ".groundtruth")
+        for person in (scene_dir / "humans").iterdir():
+            for name in ("smpl.npz", "keypoints3d.npz"):
+                (person / name).unlink()
+        scene = load_scene(scene_dir)
+        _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
+        fitted, truths, seconds = {}, {}, {}
+        for k, (pid, person) in enumerate(sorted(scene.humans.items())):
+            own_motion = FIXTURES[scenario].people[k].motion
+            motions = [m for m in raw["pose_prior_motions"] if m != own_motion]
+            config = config_from_mapping(FitConfig, {**raw, "overlay": False, "pose_prior_motions": motions},
+                                         "pipeline.yaml 02_smpl_fit")
+            started = time.perf_counter()
+            fit = Fitter(scene, model, cameras, config, "metres").fit_person(person)
+            seconds[pid] = time.perf_counter() - started
+            fitted[pid] = fit.params
+            truths[pid] = dict(np.load(truth_dir / f"{pid}_body.npz"))
+        pids = sorted(fitted)
+        overlap = {pid: [] for pid in pids}
+        for fid in sorted(cameras):
+            ours = _silhouettes(model, [
+                (vars(fitted[p]), int(np.nonzero(fitted[p].frame_ids == fid)[0][0])) if fid in fitted[p].frame_ids
+                else None for p in pids], cameras[fid], scene.width, scene.height)
+            true = _silhouettes(model, [(truths[p], fid) for p in pids], cameras[fid], scene.width, scene.height)
+            for k, pid in enumerate(pids):
+                union = ((ours == k) | (true == k)).sum()
+                if (true == k).sum() > 0:
+                    overlap[pid].append(((ours == k) & (true == k)).sum() / union)
+        for k, pid in enumerate(pids):
+            errors = joint_errors(model, fitted[pid], truths[pid])
+            rows.append({"scenario": scenario, "person": pid, "motion": FIXTURES[scenario].people[k].motion,
+                         "mode": "keypoints2d", "seconds": seconds[pid], "silhouette_iou": float(np.mean(overlap[pid])),
+                         **errors})
+    return rows
+
+
+def print_unseen_table(size: str, rows: list[dict]) -> None:
+    print(f"\n### {size} scenes not seen (seed {UNSEEN_SEED}, 2D keypoints only, pose prior without the "
+          f"person's own motion)\n")
+    print("| scene | person | motion | frames | as fitted, cm | sequence-aligned, cm | silhouette IoU vs true body | s |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['scenario']} | {r['person']} | {r['motion']} | {r['frames']} | {100 * r['mpjpe_m']:.1f} | "
+              f"{100 * r['sequence_aligned_m']:.1f} | {r['silhouette_iou']:.3f} | {r['seconds']:.1f} |")
+
+
+def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS) -> None:
     print(f"\n### {size} fixtures: mean per-joint error, cm (24 joints, fitted frames)\n")
     print("| mode | condition | people | as fitted | sequence-aligned | frame-aligned (PA) | worst person, seq.-aligned | s per person |")
     print("|---|---|---|---|---|---|---|---|")
     for mode in ("keypoints3d", "keypoints2d"):
-        for condition in CONDITIONS:
+        for condition in conditions:
             sel = [r for r in rows if r["mode"] == mode and r["condition"] == condition]
             worst = max(sel, key=lambda r: r["sequence_aligned_m"])
             print(f"| {mode} | {condition} | {len(sel)} | {100 * np.mean([r['mpjpe_m'] for r in sel]):.2f} | "
@@ -111,6 +192,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also the full-size scenes (minutes)")
     parser.add_argument("--only-full", action="store_true", help="the full-size scenes only")
+    parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=SCENARIOS)
+    parser.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=CONDITIONS)
+    parser.add_argument("--no-unseen", action="store_true", help="skip the scenes-not-seen table")
     parser.add_argument("--per-person", action="store_true", help="print every person's row too")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
@@ -118,8 +202,10 @@ def main() -> int:
     cache.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         for size in ("full",) if args.only_full else ("small", "full") if args.full else ("small",):
-            rows = evaluate(size, Path(tmp))
-            print_table(size, rows)
+            rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions))
+            print_table(size, rows, tuple(args.conditions))
+            if not args.no_unseen:
+                print_unseen_table(size, evaluate_unseen(size, Path(tmp)))
             if args.per_person:
                 for r in rows:
                     print(f"{r['scenario']} {r['person']} {r['mode']} {r['condition']}: "

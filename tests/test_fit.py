@@ -16,7 +16,7 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import FitSchedule, fit_track, initial_state_2d, initial_state_3d
+from glimpse.fit.keypoint_fit import FitSchedule, choose_turns, fit_track, initial_state_2d, initial_state_3d
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
 from glimpse.fit.priors import build_pose_prior, joint_limits, mirror_body_pose, motion_poses
 from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
@@ -125,7 +125,8 @@ def _known_person(model, frames: int):
 def _fit(model, config, prior, track, initial):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
-    schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal), False)
+    schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal),
+                           tuple(config.robust_scale_anneal), False)
     return fit_track(energy, initial, schedule, "person test")
 
 
@@ -182,3 +183,53 @@ def test_a_fit_that_diverges_stops_with_a_clear_message(model, config, prior):
     initial.transl[1, 0] = float("nan")
     with pytest.raises(GlimpseError, match=r"person test: the fit diverged .* in its global stage"):
         _fit(model, config, prior, track, initial)
+
+
+def test_choosing_turns_prefers_a_steady_heading_over_a_slightly_better_flip():
+    frames, yaw = 5, np.radians([0.0, 90.0, 180.0, 270.0])
+    orients = np.zeros((4, frames, 3))
+    orients[:, :, 1] = yaw[:, None]
+    data = np.full((4, frames), 100.0)
+    data[0] = 10.0
+    data[2, 2] = 8.0  # frame 2 alone would rather face backwards
+    times, ids = np.arange(frames) / 30.0, np.arange(frames)
+    assert choose_turns(data, orients, times, ids, 180.0, 15).tolist() == [0, 0, 0, 0, 0]
+    data = np.full((4, frames), 5000.0)  # nothing else fits: the first two frames face forwards ...
+    data[0, :2], data[2, 2:] = 10.0, 1.0  # ... and the rest backwards: one turn, at frame 2
+    assert choose_turns(data, orients, times, ids, 180.0, 15).tolist() == [0, 0, 2, 2, 2]
+    far_apart = np.array([0, 1, 40, 41, 42])  # a long gap: no link, each side decides alone
+    data[2, :2], data[0, 2:], data[2, 2:] = 100.0, 10.0, 8.0
+    data[[1, 3]] = 100.0
+    assert choose_turns(data, orients, far_apart / 30.0, far_apart, 180.0, 15).tolist() == [0, 0, 2, 2, 2]
+
+
+def test_a_moving_camera_in_sfm_units_gives_the_person_scale(model, config, prior):
+    """The same scene in a world scaled by 0.4 (SfM units): pixels are unchanged, and the camera's
+    motion around the person fixes its size in world units, so the fitted scale is about 0.4."""
+    frames, units_per_metre = 12, 0.4
+    truth = _known_person(model, frames)
+    truth = BodyParams(truth.frame_ids, np.zeros(10), truth.global_orient, truth.body_pose, truth.transl, 1.0,
+                       "free", truth.interpolated)
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    with torch.no_grad():
+        points = body(torch.zeros(10, dtype=F64), torch.as_tensor(truth.global_orient),
+                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    K = intrinsics(320, 240, 60.0)
+    Rs, ts, pixels = [], [], []
+    for f in range(frames):
+        centre = truth.transl[f] + [0.0, 0.3, 0.0]
+        angle = np.radians(-60.0 + 120.0 * f / (frames - 1))
+        R, t = look_at_pose(centre + 3.0 * np.array([np.sin(angle), 0.2, np.cos(angle)]), centre)
+        cam = points.keypoints[f].numpy() @ R.T + t
+        pixels.append(cam[:, :2] / cam[:, 2:] * [K[0, 0], K[1, 1]] + K[:2, 2])
+        Rs.append(R)
+        ts.append(units_per_metre * t)  # the same camera in a world scaled by units_per_metre
+    track = Track(torch.arange(frames), torch.arange(frames, dtype=F64) / 10, torch.as_tensor(np.stack(pixels)),
+                  torch.ones(frames, 17, dtype=F64), torch.as_tensor(np.repeat(K[None], frames, 0)),
+                  torch.as_tensor(np.stack(Rs)), torch.as_tensor(np.stack(ts)))
+    energy = FitEnergy(body, track, prior, joint_limits(), config.weights, config.max_interpolated_gap)
+    schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal),
+                           tuple(config.robust_scale_anneal), True)
+    outcome = fit_track(energy, initial_state_2d(body, track, prior.mean), schedule, "person test")
+    assert float(outcome.state.log_scale.exp()) == pytest.approx(units_per_metre, rel=0.1)
+    assert outcome.stages[0]["scale_from_motion"] == pytest.approx(units_per_metre, rel=0.25)

@@ -145,3 +145,32 @@ def test_body_params_files_carry_their_version(tmp_path):
     np.savez(tmp_path / "body.npz", format=np.array("glimpse-body-params/9"))
     with pytest.raises(GlimpseError, match="this reader knows glimpse-body-params/1"):
         read_body_params(tmp_path / "body.npz")
+
+
+def test_in_the_wild_a_moving_camera_in_sfm_units_gets_the_person_scale(tmp_path, model):
+    """No cameras.json (stage 01 runs SfM, frame in its own units) and 2D keypoints only: the fitted
+    scale matches the SfM frame's units per metre (from the true camera centres)."""
+    scene = make_scene("moving_camera", tmp_path / "scene", "small", seed=0)
+    true_cameras = read_json(scene / "cameras.json")
+    for path in (scene / "cameras.json", scene / "humans" / "p0" / "smpl.npz", scene / "humans" / "p0" / "keypoints3d.npz"):
+        path.unlink()
+    import shutil
+
+    shutil.rmtree(scene / "eval")
+    sfm_dir = run("01_sfm", scene, tmp_path / "out")
+    assert read_json(sfm_dir / "report.json")["units"] == "sfm"
+    from glimpse.cameras.align import umeyama
+    from glimpse.io.cameras_json import read_cameras_json
+
+    _, _, sfm = read_cameras_json(sfm_dir / "cameras.json")
+    ids = sorted(sfm)
+    true_centres = [-np.asarray(true_cameras["frames"][f"{i:06d}"]["R"]).T @ true_cameras["frames"][f"{i:06d}"]["t"]
+                    for i in ids]
+    units_per_metre = umeyama(np.stack(true_centres), np.stack([sfm[i].centre for i in ids])).scale
+    result = run("02_smpl_fit", scene, tmp_path / "out", FAST)
+    report = read_json(result / "humans" / "p0" / "fit_report.json")
+    assert report["mode"] == "keypoints2d" and report["scale_fitted"]
+    assert report["scale"] == pytest.approx(units_per_metre, rel=0.15)
+    assert report["metres_per_unit"] == pytest.approx(1 / report["scale"])
+    errors = joint_errors(model, read_body_params(result / "humans" / "p0" / "body.npz"), _truth(scene, "p0"))
+    assert errors["sequence_aligned_m"] < 0.10, errors

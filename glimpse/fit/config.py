@@ -14,6 +14,8 @@ class FitWeights:
     joint_limits: float
     shape_prior: float
     accel_sigma_m_s2: float
+    speed_sigma_m_s: float
+    turn_rate_sigma_deg_s: float
 
 
 @dataclass(frozen=True)
@@ -29,4 +31,5 @@ class FitConfig:
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]
+    robust_scale_anneal: list[float]
     overlay: bool

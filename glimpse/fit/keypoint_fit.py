@@ -6,9 +6,14 @@
    shoulder and hip appear on the image's left (the person faces away); its depth from the
    keypoints' spread in pixels against the body's spread in metres; placed on the ray through
    the keypoints' centre. Pose: the pose prior's mean; betas 0.
-2. Global stage: orientation, translation (and scale) against the torso keypoints only.
+2. Global stage: orientation, translation (and scale) against the torso and head keypoints.
+   In 2D every frame is also tried turned by 90, 180 and 270 degrees about its up axis, and the
+   sequence of turns that explains the keypoints best without spinning round between frames is
+   kept (choose_turns).
 3. Full stage: everything, with the priors; the pose prior's weight annealed from strong to
-   its final value (SMPLify), each step minimised by L-BFGS with a strong-Wolfe line search.
+   its final value (SMPLify) while the robust scale shrinks from wide (a limb far from its
+   keypoints still feels them) to its final value (outliers count little), each step minimised
+   by L-BFGS with a strong-Wolfe line search.
 """
 
 from __future__ import annotations
@@ -23,13 +28,13 @@ from torch import Tensor
 from glimpse.cameras.align import umeyama
 from glimpse.errors import GlimpseError
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.objective import FitEnergy, FitState, Track
+from glimpse.fit.objective import FitEnergy, FitState, Track, acceleration_energy, speed_energy
 
 TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
 HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")  # tell which way a profile faces
 YAW_HYPOTHESES_DEG = (0.0, 90.0, 180.0, 270.0)  # 2D global stage: turns about the body's up axis tried
 LEFT_RIGHT_PAIRS = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"))
-LBFGS_HISTORY = 20
+LBFGS_HISTORY = 20  # L-BFGS memory (pairs of updates); torch's default is 100, 20 is ample at this size
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,7 @@ class FitSchedule:
     global_iterations: int  # L-BFGS iterations of the global stage
     full_iterations: int  # L-BFGS iterations per annealing step of the full stage
     pose_prior_anneal: tuple[float, ...]  # multipliers of the pose-prior weight, one per step, last = 1
+    robust_scale_anneal: tuple[float, ...]  # multipliers of the robust scale, one per step
     fit_scale: bool  # optimise the person's scale (world units per metre): frames in SfM units
 
 
@@ -167,9 +173,11 @@ def _minimise(energy: FitEnergy, state: FitState, names: list[str], iterations: 
 def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> FitOutcome:
     """Run the global and full stages from ``initial``; ``who`` names the person in errors."""
     track = energy.track
-    energy.use_priors = False
+    energy.use_priors, energy.use_speed = False, schedule.fit_scale
     if track.is_2d:
         state, stage = _global_stage_2d(energy, initial, schedule, who)
+        if schedule.fit_scale:
+            stage["scale_from_motion"] = _scale_from_motion(energy, state)
     else:
         state = initial.detached()
         energy.track = track.only(_global_indices(energy.body))
@@ -177,8 +185,9 @@ def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: 
                           who, "global")
     stages = [stage]
     energy.track, energy.use_priors = track, True
-    for step, multiplier in enumerate(schedule.pose_prior_anneal):
-        energy.pose_prior_scale = multiplier
+    for step, (multiplier, robust) in enumerate(zip(schedule.pose_prior_anneal, schedule.robust_scale_anneal,
+                                                    strict=True)):
+        energy.pose_prior_scale, energy.robust_scale_factor = multiplier, robust
         energy.update_depth_reference(state)
         stages.append(_minimise(energy, state, ["betas", "global_orient", "body_pose", "transl", *_scale(schedule)],
                                 schedule.full_iterations, who, f"full_{step + 1}"))
@@ -189,9 +198,70 @@ def _scale(schedule: FitSchedule) -> list[str]:
     return ["log_scale"] if schedule.fit_scale else []
 
 
+SCALE_CANDIDATES = np.geomspace(1e-3, 1e3, 121)  # world units per metre tried by _scale_from_motion
+
+
+def _scale_from_motion(energy: FitEnergy, state: FitState) -> float:
+    """In SfM units one view cannot tell a person's size from its distance: every scale s fits the
+    keypoints once each frame's body is moved along its camera's rays to s times its distance.
+    Across a moving camera's frames only the right s makes the person move like a person: pick
+    the candidate whose pelvis path (in metres of body) has the least speed and acceleration
+    energy, and rescale the state to it. Returns the scale chosen (1 when nothing tells)."""
+    track, w = energy.track, energy.weights
+    with torch.no_grad():
+        root = energy.posed(state).joints[:, 0]  # [T, 3] at the state's scale
+        centres = -torch.einsum("tji,tj->ti", track.R, track.t)  # camera centres [T, 3]
+        scale_now = state.log_scale.exp()
+        costs = []
+        for candidate in SCALE_CANDIDATES:
+            factor = candidate / scale_now
+            metres = (centres + factor * (root - centres)) / candidate
+            costs.append(float(speed_energy(metres, track.times_s, track.frame_ids, w.speed_sigma_m_s,
+                                            energy.max_gap_frames)
+                               + acceleration_energy(metres[:, None], track.times_s, track.frame_ids,
+                                                     w.accel_sigma_m_s2, energy.max_gap_frames)))
+        costs = np.array(costs)
+        if not np.isfinite(costs).all() or costs.max() - costs.min() <= 1e-9 * max(costs.max(), 1.0):
+            return float(scale_now)
+        best = float(SCALE_CANDIDATES[int(costs.argmin())])
+        factor = best / scale_now
+        # x -> c + factor (x - c) for every point of frame t, x = scale * A + transl: scale and transl change
+        state.transl = centres + factor * (state.transl - centres)
+        state.log_scale = torch.log(torch.as_tensor(best, dtype=state.log_scale.dtype))
+    return best
+
+
+def choose_turns(data: np.ndarray, orients: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray,
+                 sigma_deg_s: float, max_gap_frames: int) -> np.ndarray:
+    """The hypothesis per frame minimising data + turning cost over the sequence (Viterbi).
+
+    data [H, T] each hypothesis' data energy per frame; orients [H, T, 3] their root orientations
+    (axis-angle); turning from one frame to the next at w deg/s costs (w / sigma_deg_s)^2, between
+    frames at most max_gap_frames apart (a person does not spin round between two frames; a
+    profile fitted facing backwards in one frame would). Returns [T] hypothesis indices."""
+    hypotheses, frames = data.shape
+    total, back = data[:, 0].copy(), np.zeros((frames, hypotheses), np.int64)
+    for t in range(1, frames):
+        step = np.zeros((hypotheses, hypotheses))  # [previous, current]
+        if frame_ids[t] - frame_ids[t - 1] <= max_gap_frames:
+            before = Rotation.from_rotvec(np.repeat(orients[:, t - 1], hypotheses, 0))
+            after = Rotation.from_rotvec(np.tile(orients[:, t], (hypotheses, 1)))
+            degrees = np.degrees((before.inv() * after).magnitude()).reshape(hypotheses, hypotheses)
+            step = (degrees / max(times_s[t] - times_s[t - 1], 1e-9) / sigma_deg_s) ** 2
+        candidates = total[:, None] + step
+        back[t] = candidates.argmin(0)
+        total = candidates.min(0) + data[:, t]
+    chosen = np.zeros(frames, np.int64)
+    chosen[-1] = int(total.argmin())
+    for t in range(frames - 1, 0, -1):
+        chosen[t - 1] = back[t, chosen[t]]
+    return chosen
+
+
 def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> tuple[FitState, dict]:
     """Each frame's body turned by every yaw hypothesis about its up axis, all minimised at once
-    (frames are independent here); per frame, the hypothesis that explains the torso and head best."""
+    (frames are independent here); then the sequence of hypotheses that explains the torso and head
+    keypoints best without spinning round between frames (choose_turns)."""
     track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(YAW_HYPOTHESES_DEG)
     turned = []
     for yaw in YAW_HYPOTHESES_DEG:
@@ -204,11 +274,12 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
     energy.track = Track(repeat(track.frame_ids), repeat(track.times_s), repeat(selected.points),
                          repeat(selected.weight), repeat(track.K), repeat(track.R), repeat(track.t))
     energy.update_depth_reference(batch)
-    stage = _minimise(energy, batch, ["global_orient", "transl", *_scale(schedule)],
-                      schedule.global_iterations, who, "global")
+    stage = _minimise(energy, batch, ["global_orient", "transl"], schedule.global_iterations, who, "global")
     with torch.no_grad():
-        per_frame = energy.data_per_frame(batch)
-    best = per_frame.reshape(hypotheses, frames).argmin(0)
+        per_frame = energy.data_per_frame(batch).reshape(hypotheses, frames).numpy()
+    orients = batch.global_orient.detach().reshape(hypotheses, frames, 3).numpy()
+    best = torch.as_tensor(choose_turns(per_frame, orients, track.times_s.numpy(), track.frame_ids.numpy(),
+                                        energy.weights.turn_rate_sigma_deg_s, energy.max_gap_frames))
     rows = best * frames + torch.arange(frames)
     state = FitState(initial.betas.clone(), batch.global_orient[rows].clone(), initial.body_pose.clone(),
                      batch.transl[rows].clone(), batch.log_scale.detach().clone())

@@ -1,13 +1,16 @@
 """The fitting energy of one person over T frames (SMPLify-style, in the spirit of a log posterior):
 
-    E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + smoothness
+    E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + smoothness + speed
 
 - data: sum over confident keypoints of ``c * (rho^2 / sigma^2) * r^2 / (r^2 + rho^2)``, a Geman-McClure
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
   residual in metres at the person: the 3D distance, or the pixel distance times depth / focal length
   (so 2D and 3D fits share sigma and rho, and a far person weighs as much as a near one).
 - smoothness: squared joint accelerations (second differences over the frames' times, seconds) over
-  ``sigma_acc^2``, between frames at most ``max_gap`` frames apart.
+  ``sigma_acc^2``, between frames at most ``max_gap`` frames apart; speed (only when the scale is
+  fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
+  metres of body (world units divided by the person's scale), so in SfM units they tell the scale:
+  placed at the wrong depth in every frame of a moving camera, a person would race along an arc.
 Every term is a sum over frames (not a mean), so the priors weigh less where keypoints are many.
 """
 
@@ -89,6 +92,16 @@ def data_energy(residual_m: Tensor, weight: Tensor, noise_m: float, robust_m: fl
     return (weight * (robust_m**2 / noise_m**2) * squared / (squared + robust_m**2)).sum(-1)
 
 
+def speed_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s: float, max_gap_frames: int) -> Tensor:
+    """Squared speed of points [T, 3] (metres) between consecutive frames at most max_gap_frames
+    apart, over sigma^2."""
+    if len(times_s) < 2:
+        return points.new_zeros(())
+    keep = ((frame_ids[1:] - frame_ids[:-1]) <= max_gap_frames).to(points.dtype)
+    velocity = (points[1:] - points[:-1]) / (times_s[1:] - times_s[:-1])[:, None]
+    return (keep * velocity.square().sum(-1)).sum() / sigma_m_s**2
+
+
 def acceleration_energy(joints: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s2: float,
                         max_gap_frames: int) -> Tensor:
     """Squared second derivative of joint positions [T, J, 3] over times [T], over sigma^2."""
@@ -111,8 +124,10 @@ class FitEnergy:
         self.body, self.track, self.prior, self.limits, self.weights = body, track, prior, limits, weights
         self.max_gap_frames = max_gap_frames  # smoothness links frames at most this far apart
         self.depth_ref: Tensor | None = None  # [T] for 2D: set by update_depth_reference
-        self.pose_prior_scale = 1.0  # annealing multiplier
+        self.pose_prior_scale = 1.0  # annealing multipliers of the pose prior's weight ...
+        self.robust_scale_factor = 1.0  # ... and of the robust scale
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
+        self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
 
     def posed(self, state: FitState):
         return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
@@ -128,7 +143,8 @@ class FitEnergy:
         """[T] data energy of each frame (keypoints [T, K, 3] when already posed)."""
         keypoints = self.posed(state).keypoints if keypoints is None else keypoints
         residual = keypoint_residual_m(keypoints, self.track, self.depth_ref)
-        return data_energy(residual, self.track.weight, self.weights.keypoint_noise_m, self.weights.robust_scale_m)
+        return data_energy(residual, self.track.weight, self.weights.keypoint_noise_m,
+                           self.weights.robust_scale_m * self.robust_scale_factor)
 
     def terms(self, state: FitState) -> dict[str, Tensor]:
         w = self.weights
@@ -138,8 +154,12 @@ class FitEnergy:
             terms["pose_prior"] = w.pose_prior * self.pose_prior_scale * self.prior.energy(state.body_pose).sum()
             terms["joint_limits"] = w.joint_limits * self.limits.energy(state.body_pose).sum()
             terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
-            terms["smoothness"] = acceleration_energy(out.joints, self.track.times_s, self.track.frame_ids,
+            metres = out.joints / state.log_scale.exp()  # motion is judged in metres of body
+            terms["smoothness"] = acceleration_energy(metres, self.track.times_s, self.track.frame_ids,
                                                       w.accel_sigma_m_s2, self.max_gap_frames)
+            if self.use_speed:
+                terms["speed"] = speed_energy(metres[:, 0], self.track.times_s, self.track.frame_ids,
+                                              w.speed_sigma_m_s, self.max_gap_frames)
         return terms
 
     def __call__(self, state: FitState) -> Tensor:

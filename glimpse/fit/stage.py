@@ -152,7 +152,11 @@ class Fitter:
         else:
             initial = initial_state_2d(body, track, self.prior.mean)
         c = self.config
-        schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal), self.fit_scale)
+        if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
+            raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
+                               f"{c.pose_prior_anneal} must have one value per full-stage step each")
+        schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
+                               tuple(c.robust_scale_anneal), self.fit_scale)
         try:
             outcome = fit_track(energy, initial, schedule, who)
         except GlimpseError as exc:
