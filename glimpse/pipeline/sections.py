@@ -7,6 +7,7 @@ from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
 from glimpse.fit.config import FitConfig
+from glimpse.masks.config import MasksConfig
 from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -15,4 +16,5 @@ SECTION_CONFIGS: dict[str, type] = {
     "render": RenderConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
+    "03_masks": MasksConfig,
 }

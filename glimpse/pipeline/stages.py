@@ -52,7 +52,6 @@ STAGES: tuple[StageSpec, ...] = (
         upstream=("01_sfm", "02_smpl_fit"),
         shared=("compute", "body"),
         scene_inputs=("humans/*/masks/*.png",),
-        issue="#8 (stage 03 masks and stage 04 background)",
     ),
     StageSpec(
         "04_bg_pretrain",

@@ -1,0 +1,92 @@
+"""One frame's masks from its body layers (pure functions on arrays; lengths in pixels).
+
+Body mode, people taken nearest first (pelvis depth, as GTU):
+  region_p  = the pixels where p's body is nearest, grown by ``dilate_px[p]`` (hair, loose
+              clothes), minus pixels where a nearer person's body is or that a nearer person took;
+  visible_p = region_p minus static scene next to or in front of p (static_near[p], when known:
+              background in the band, an occluder over the body).
+Provided mode: visible_p is given (the scene's masks).
+Both: hidden_p = p's full projection where another person is visible (body mode: a nearer one),
+or where static scene is in front (provided mode: the interior, eroded by ``erode_px[p]``, where
+no person is visible); occluder_p = hidden_p grown by ``occluder_px[p]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from glimpse.masks.layers import BodyLayers
+
+
+@dataclass(frozen=True)
+class FrameMasks:
+    """visible, occluders [N, H, W] bool per body; order: body indices nearest first."""
+
+    visible: np.ndarray
+    occluders: np.ndarray
+    order: list[int]
+
+
+def disk(mask: np.ndarray, radius_px: float, grow: bool = True) -> np.ndarray:
+    """mask [H, W] bool dilated (grow) or eroded by a disk of ``radius_px`` (rounded; 0 = unchanged)."""
+    radius = int(round(radius_px))
+    if radius <= 0:
+        return mask.copy()
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    op = cv2.dilate if grow else cv2.erode
+    return op(mask.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+
+
+# refine(body index, region [H, W], sure [H, W], forbidden [H, W]) -> refined region [H, W]
+Refiner = Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def body_frame_masks(layers: BodyLayers, dilate_px: np.ndarray, occluder_px: np.ndarray,
+                     static_in_front: np.ndarray | None, static_near: np.ndarray | None,
+                     refine: Refiner | None = None) -> FrameMasks:
+    """Visible and occluder masks from the bodies alone, plus, when given, [N, H, W] bool pixels
+    where static scene is evidently in front of each body, and where static scene shows next to or
+    over each body (glimpse.masks.static). ``refine`` may reshape each region (snapping it to image
+    edges) keeping ``sure`` pixels and never taking ``forbidden`` ones."""
+    order = [int(k) for k in np.argsort(layers.pelvis_depth, kind="stable")]
+    taken = np.zeros(layers.owner.shape, bool)
+    visible = np.zeros(layers.full.shape, bool)
+    for rank, p in enumerate(order):
+        nearer_bodies = np.isin(layers.owner, order[:rank])
+        forbidden = nearer_bodies | taken
+        if static_near is not None:
+            forbidden = forbidden | static_near[p]
+        region = disk(layers.owner == p, dilate_px[p]) & ~forbidden
+        if refine is not None:
+            sure = disk(layers.owner == p, 1.0, grow=False) & ~forbidden
+            region = refine(p, region, sure, forbidden) & ~forbidden
+        visible[p] = region
+        taken |= region
+    return FrameMasks(visible, _occluders(layers, visible, order, occluder_px, static_in_front, True), order)
+
+
+def provided_frame_masks(layers: BodyLayers, visible: np.ndarray, erode_px: np.ndarray,
+                         occluder_px: np.ndarray) -> FrameMasks:
+    """Occluders for given visible masks [N, H, W]: hidden parts of each projected body."""
+    order = [int(k) for k in np.argsort(layers.pelvis_depth, kind="stable")]
+    nobody = ~visible.any(0)
+    in_front = np.stack([disk(full, erode_px[p], grow=False) & nobody for p, full in enumerate(layers.full)]) \
+        if len(visible) else None
+    return FrameMasks(visible, _occluders(layers, visible, order, occluder_px, in_front, False), order)
+
+
+def _occluders(layers: BodyLayers, visible: np.ndarray, order: list[int], occluder_px: np.ndarray,
+               static_in_front: np.ndarray | None, nearer_only: bool) -> np.ndarray:
+    occluders = np.zeros(layers.full.shape, bool)
+    full = layers.full
+    for rank, p in enumerate(order):
+        people_in_front = order[:rank] if nearer_only else [q for q in order if q != p]
+        hidden = full[p] & visible[people_in_front].any(0)
+        if static_in_front is not None:
+            hidden |= static_in_front[p] & ~visible[p]
+        occluders[p] = disk(hidden, occluder_px[p])
+    return occluders

@@ -1,0 +1,20 @@
+"""Stage 03's parameters (defaults and comments: pipeline.yaml, section 03_masks)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class MasksConfig:
+    mode: Literal["auto", "provided", "body"]
+    dilate_m: float
+    refine: Literal["grabcut", "none"]
+    grabcut_iterations: int
+    grabcut_band_m: float
+    occluder_dilate_m: float
+    static_occluders: bool
+    static_max_std: float
+    static_erode_m: float
+    static_motion_min_m: float

@@ -1,0 +1,184 @@
+"""Stage 03's logic: per frame with a camera, every person's visible mask, the union, and each
+person's occluder mask, written as PNGs, with the depth order and (where the scene has masks
+and the masks were computed) the IoU against them.
+
+Modes: ``provided`` uses the scene's masks (undistorted like the frames); ``body`` computes them
+from stage 02's bodies (glimpse.masks.assign) and, for a static camera, the frames' static-scene
+evidence (glimpse.masks.static); ``auto`` is ``provided`` when every person has a mask in every
+frame, else ``body``. Lengths in pipeline.yaml are metres at the person, turned into pixels per
+frame with the focal length, the pelvis depth and the person's scale (world units per metre).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from glimpse.body.model import BodyModel
+from glimpse.body.params import BodyParams
+from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.undistort import scene_undistorter
+from glimpse.errors import GlimpseError
+from glimpse.io.images import frame_name, parse_frame_name, read_mask, read_rgb, write_png
+from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, provided_frame_masks
+from glimpse.masks.config import MasksConfig
+from glimpse.masks.layers import BodyLayers, body_layers
+from glimpse.masks.refine import grabcut_region
+from glimpse.masks.static import SurfaceMotion, temporal_std
+from glimpse.scene import Scene
+
+MASKS_FORMAT = "glimpse-masks/1"
+
+
+@dataclass(frozen=True)
+class MasksInputs:
+    scene: Scene
+    model: BodyModel
+    cameras: dict[int, PinholeCamera]
+    bodies: dict[str, BodyParams]  # stage 02's, per person
+    frames_dir: Path  # stage 01's frames/
+    camera_motion: str  # stage 01's "static" | "moving"
+
+
+def choose_mode(inputs: MasksInputs, config: MasksConfig) -> str:
+    complete = all(set(inputs.cameras) <= set(person.masks) for person in inputs.scene.humans.values())
+    if config.mode == "provided" and not complete:
+        missing = [pid for pid, person in sorted(inputs.scene.humans.items()) if not set(inputs.cameras) <= set(person.masks)]
+        raise GlimpseError(f"03_masks.mode=provided needs humans/<pid>/masks/<frame>.png for every frame with a camera; "
+                           f"missing for {', '.join(missing)}")
+    if config.mode == "auto":
+        return "provided" if complete else "body"
+    return config.mode
+
+
+def frame_paths(frames_dir: Path) -> dict[int, Path]:
+    return {fid: p for p in frames_dir.iterdir() if (fid := parse_frame_name(p.stem)) is not None}
+
+
+def static_scene(inputs: MasksInputs, config: MasksConfig) -> tuple[np.ndarray | None, str]:
+    """[H, W] bool static pixels (or None) and why."""
+    if not config.static_occluders:
+        return None, "off (03_masks.static_occluders)"
+    if inputs.camera_motion != "static":
+        return None, "not available: the camera moves"
+    paths = frame_paths(inputs.frames_dir)
+    std = temporal_std(read_rgb(paths[f]) for f in tqdm(sorted(inputs.cameras), desc="03_masks static scene",
+                                                          unit="frame", leave=False))
+    return std < config.static_max_std, f"temporal colour std < {config.static_max_std} over {len(inputs.cameras)} frames"
+
+
+def _posed(model: BodyModel, params: BodyParams, row: int) -> tuple[np.ndarray, np.ndarray]:
+    with torch.no_grad():
+        out = model(torch.as_tensor(params.betas)[None], torch.as_tensor(params.global_orient[row:row + 1]),
+                    torch.as_tensor(params.body_pose[row:row + 1]), torch.as_tensor(params.transl[row:row + 1]),
+                    scale=params.scale)
+    return out.vertices[0].numpy(), out.joints[0, 0].numpy()
+
+
+def _pixels(metres: float, camera: PinholeCamera, layers: BodyLayers, scales: np.ndarray) -> np.ndarray:
+    """[N] a length in metres at each person, in pixels at its pelvis depth."""
+    focal = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
+    return focal * metres * scales / np.maximum(layers.pelvis_depth, 1e-6)
+
+
+class _Frames:
+    """Each frame's posed bodies and their layers (people present in that frame, in pid order)."""
+
+    def __init__(self, inputs: MasksInputs):
+        self.inputs, self.pids = inputs, sorted(inputs.scene.humans)
+        self.faces = inputs.model.faces.numpy()
+        self.rows = {pid: {int(f): i for i, f in enumerate(inputs.bodies[pid].frame_ids)} for pid in self.pids}
+
+    def layers(self, fid: int) -> tuple[list[str], BodyLayers, np.ndarray]:
+        """(people present, their layers, their scales) in frame ``fid``."""
+        present = [pid for pid in self.pids if fid in self.rows[pid]]
+        posed = [_posed(self.inputs.model, self.inputs.bodies[pid], self.rows[pid][fid]) for pid in present]
+        scene = self.inputs.scene
+        layers = body_layers([v for v, _ in posed], [p for _, p in posed], self.faces, self.inputs.cameras[fid],
+                             scene.width, scene.height)
+        return present, layers, np.array([self.inputs.bodies[pid].scale for pid in present])
+
+
+def surface_motion(frames: _Frames) -> SurfaceMotion:
+    """First pass over the frames: how the body surface under each pixel moves, per person."""
+    scene, model = frames.inputs.scene, frames.inputs.model
+    motion = SurfaceMotion(frames.pids, scene.height, scene.width, model.v_template.numpy()[frames.faces].mean(1))
+    for fid in tqdm(sorted(frames.inputs.cameras), desc="03_masks body motion", unit="frame", leave=False):
+        present, layers, _ = frames.layers(fid)
+        for k, pid in enumerate(present):
+            motion.add(pid, layers.faces[k])
+    return motion
+
+
+def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
+    """Write masks/, occluders/ under ``out``; return the masks.json document."""
+    mode = choose_mode(inputs, config)
+    scene, frames = inputs.scene, _Frames(inputs)
+    pids = frames.pids
+    static, static_note = static_scene(inputs, config) if mode == "body" else (None, "not needed (provided masks)")
+    moving = None
+    if static is not None:
+        motion = surface_motion(frames)
+        moving = {pid: motion.moving(pid, config.static_motion_min_m) for pid in pids}
+    undistorter = scene_undistorter(scene)
+    frame_paths_cache = frame_paths(inputs.frames_dir)
+    frames_doc: dict[str, dict] = {}
+    overlaps: dict[str, list[float]] = {pid: [] for pid in pids}
+    can_score = mode == "body" and all(person.masks for person in scene.humans.values())
+    for fid in tqdm(sorted(inputs.cameras), desc="03_masks", unit="frame"):
+        camera = inputs.cameras[fid]
+        present, layers, scales = frames.layers(fid)
+        erode = _pixels(config.static_erode_m, camera, layers, scales)
+        occluder = _pixels(config.occluder_dilate_m, camera, layers, scales)
+        if mode == "provided":
+            given = np.stack([undistorter.mask(read_mask(scene.humans[pid].masks[fid])) for pid in present]) if present \
+                else np.zeros((0, scene.height, scene.width), bool)
+            masks = provided_frame_masks(layers, given, erode, occluder)
+        else:
+            dilate = _pixels(config.dilate_m, camera, layers, scales)
+            in_front = near = None
+            if moving is not None and present:
+                # static colour means scene (not person) only where the body there, or next to it, moves
+                in_front = np.stack([disk(layers.full[k], erode[k], grow=False) & static & moving[pid]
+                                     for k, pid in enumerate(present)])
+                near = np.stack([static & disk(moving[pid] & layers.full[k], dilate[k])
+                                 for k, pid in enumerate(present)])
+            refine = None
+            if config.refine == "grabcut":
+                image = read_rgb(frame_paths_cache[fid])
+                band = _pixels(config.grabcut_band_m, camera, layers, scales)
+                refine = lambda k, region, sure, forbidden: grabcut_region(  # noqa: E731
+                    image, region, sure, forbidden, band[k], config.grabcut_iterations)
+            masks = body_frame_masks(layers, dilate, occluder, in_front, near, refine)
+        _write_frame(out, fid, pids, present, masks, scene.height, scene.width)
+        frames_doc[frame_name(fid)] = {
+            "depth_order": [present[k] for k in masks.order],
+            "pelvis_depth": {present[k]: float(layers.pelvis_depth[k]) for k in masks.order},
+            "visible_pixels": {present[k]: int(masks.visible[k].sum()) for k in masks.order}}
+        if can_score:
+            for k, pid in enumerate(present):
+                if fid in scene.humans[pid].masks:
+                    truth = undistorter.mask(read_mask(scene.humans[pid].masks[fid]))
+                    union = (truth | masks.visible[k]).sum()
+                    if union:
+                        overlaps[pid].append(float((truth & masks.visible[k]).sum() / union))
+    doc = {"format": MASKS_FORMAT, "mode": mode, "people": pids, "static_scene": static_note,
+           "frames": frames_doc}
+    if can_score:
+        doc["iou_vs_scene_masks"] = {pid: (float(np.mean(v)) if v else None) for pid, v in overlaps.items()}
+    return doc
+
+
+def _write_frame(out: Path, fid: int, pids: list[str], present: list[str], masks: FrameMasks, height: int,
+                 width: int) -> None:
+    name = f"{frame_name(fid)}.png"
+    empty = np.zeros((height, width), bool)
+    for pid in pids:
+        k = present.index(pid) if pid in present else None
+        write_png(out / "masks" / pid / name, masks.visible[k] if k is not None else empty)
+        write_png(out / "occluders" / pid / name, masks.occluders[k] if k is not None else empty)
+    write_png(out / "masks" / "union" / name, masks.visible.any(0) if len(present) else empty)

@@ -1,0 +1,127 @@
+"""Stage 03: mask assignment on synthetic layers, static-scene evidence, and the stage on fixtures
+(body mode against the fixtures' true visible masks; provided mode; occluders of a table)."""
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.body.model import BodyModel
+from glimpse.fixtures.scenes import FREE_BODY, make_scene
+from glimpse.io.cameras_json import read_cameras_json
+from glimpse.io.images import read_mask
+from glimpse.masks.assign import body_frame_masks, provided_frame_masks
+from glimpse.masks.layers import BodyLayers, body_layers
+from glimpse.masks.static import SurfaceMotion, temporal_std
+from tests.stage_helpers import read_json, run
+
+
+def _squares() -> BodyLayers:
+    """Two 'bodies' on a 20x20 image: body 0 far (x 2..11), body 1 near (x 8..15), rows 5..14."""
+    faces = np.full((2, 20, 20), -1)
+    faces[0, 5:15, 2:12] = 1
+    faces[1, 5:15, 8:16] = 1
+    owner = np.full((20, 20), -1)
+    owner[faces[0] >= 0] = 0
+    owner[faces[1] >= 0] = 1
+    return BodyLayers(owner, faces, np.array([5.0, 3.0]))
+
+
+def test_nearer_people_keep_their_pixels_and_hide_the_farther_ones():
+    layers = _squares()
+    masks = body_frame_masks(layers, np.array([1.0, 1.0]), np.zeros(2), None, None)
+    assert masks.order == [1, 0]
+    assert masks.visible[1, 5:15, 8:16].all() and masks.visible[1, 5, 7]  # grown by one pixel
+    assert not masks.visible[0][layers.owner == 1].any()  # never where the nearer body is
+    assert not (masks.visible[0] & masks.visible[1]).any()
+    assert masks.occluders[0, 5:15, 8:12].all()  # the far body's hidden part
+    assert not masks.occluders[1].any()
+
+
+def test_static_scene_in_front_is_cut_and_becomes_an_occluder():
+    layers = _squares()
+    in_front = np.zeros((2, 20, 20), bool)
+    in_front[0, 11:15, 2:8] = True  # a 'table' before body 0's lower part
+    masks = body_frame_masks(layers, np.zeros(2), np.zeros(2), in_front, in_front)
+    assert not masks.visible[0, 11:15, 2:8].any() and masks.visible[0, 5:11, 2:8].all()
+    assert masks.occluders[0, 11:15, 2:8].all()
+
+
+def test_provided_masks_give_occluders_where_the_body_is_not_visible():
+    layers = _squares()
+    visible = np.stack([(layers.owner == 0), (layers.owner == 1)])
+    visible[0, 12:15, 2:8] = False  # something hides body 0 there
+    masks = provided_frame_masks(layers, visible, np.zeros(2), np.zeros(2))
+    assert masks.occluders[0, 12:15, 2:8].all() and masks.occluders[0, 5:15, 8:12].all()
+    assert not masks.occluders[0, 5:12, 2:8].any()
+
+
+def test_temporal_std_and_surface_motion():
+    still = np.full((4, 3, 3), 100, np.uint8)
+    flicker = [still.copy() for _ in range(4)]
+    for k, frame in enumerate(flicker):
+        frame[1, 1] = 50 * k
+    std = temporal_std(flicker)
+    assert std[0, 0] == 0 and std[1, 1] == pytest.approx(np.std([0, 50, 100, 150]) / 255)
+    motion = SurfaceMotion(["p0"], 2, 2, np.array([[0.0, 0, 0], [0.0, 0.2, 0]]))
+    motion.add("p0", np.array([[0, 0], [-1, 0]]))
+    motion.add("p0", np.array([[0, 1], [-1, -1]]))
+    assert motion.moving("p0", 0.05).tolist() == [[False, True], [False, False]]
+
+
+def test_body_layers_own_projection_and_nearest_owner():
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    rest = model.v_template.numpy()
+    from glimpse.cameras.model import PinholeCamera
+
+    camera = PinholeCamera(np.array([[80.0, 0, 32], [0, 80.0, 32], [0, 0, 1]]), np.diag([1.0, -1.0, -1.0]),
+                           np.array([0.0, 0.5, 4.0]))  # looking at the body's front from z = 4 m
+    near, far = rest + [0.0, 0.0, 1.0], rest + [0.2, 0.0, 0.0]
+    layers = body_layers([far, near], [far[0], near[0]], model.faces.numpy(), camera, 64, 64)
+    assert layers.pelvis_depth[1] < layers.pelvis_depth[0]
+    assert ((layers.owner == 1) == layers.full[1]).all()  # the near body is never hidden
+    assert (layers.owner == 0).sum() < layers.full[0].sum()  # the far one partly is
+
+
+@pytest.fixture(scope="module")
+def lower_body(tmp_path_factory):
+    root = tmp_path_factory.mktemp("masks")
+    scene = make_scene("lower_body_occluded", root / "scene", "small", seed=0)
+    run("01_sfm", scene, root / "out")
+    run("02_smpl_fit", scene, root / "out", "02_smpl_fit.overlay=false")
+    return scene, root / "out"
+
+
+def test_body_masks_match_the_true_masks_and_find_the_table(lower_body):
+    scene, out = lower_body
+    result = run("03_masks", scene, out, "03_masks.mode=body")
+    doc = read_json(result / "masks.json")
+    assert doc["mode"] == "body" and doc["static_scene"].startswith("temporal colour std")
+    assert doc["iou_vs_scene_masks"]["p0"] > 0.75
+    # the true hidden part of the body: its projection where the (dressed, larger) person is not visible
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    truth = np.load(scene.with_name(scene.name + ".groundtruth") / "p0_body.npz")
+    _, _, cameras = read_cameras_json(scene / "cameras.json")
+    found = hidden_total = 0
+    for fid, camera in sorted(cameras.items()):
+        with torch.no_grad():
+            out_body = model(torch.as_tensor(truth["betas"])[None], torch.as_tensor(truth["global_orient"][fid:fid + 1]),
+                             torch.as_tensor(truth["body_pose"][fid:fid + 1]), torch.as_tensor(truth["transl"][fid:fid + 1]))
+        layers = body_layers([out_body.vertices[0].numpy()], [out_body.joints[0, 0].numpy()], model.faces.numpy(),
+                             camera, 128, 96)
+        hidden = layers.full[0] & ~read_mask(scene / "humans" / "p0" / "masks" / f"{fid:06d}.png")
+        occluder = read_mask(result / "occluders" / "p0" / f"{fid:06d}.png")
+        found += (hidden & occluder).sum()
+        hidden_total += hidden.sum()
+    assert hidden_total > 200 and found / hidden_total > 0.8
+    union = read_mask(result / "masks" / "union" / "000012.png")
+    assert (union == read_mask(result / "masks" / "p0" / "000012.png")).all()
+
+
+def test_provided_masks_are_kept(lower_body):
+    scene, out = lower_body
+    result = run("03_masks", scene, out)
+    assert read_json(result / "masks.json")["mode"] == "provided"
+    for fid in (0, 12):
+        name = f"{fid:06d}.png"
+        assert (read_mask(result / "masks" / "p0" / name) == read_mask(scene / "humans" / "p0" / "masks" / name)).all()
+    assert read_mask(result / "occluders" / "p0" / "000012.png").sum() > 50  # the legs behind the table

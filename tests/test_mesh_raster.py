@@ -1,0 +1,57 @@
+"""The CPU z-buffer triangle rasterizer (glimpse.render.mesh_raster) against exact geometry and
+against the fixtures' OpenGL renderer (an independent implementation)."""
+
+import numpy as np
+import torch
+
+from glimpse.body.model import BodyModel
+from glimpse.fixtures.mesh_render import Mesh, render_meshes
+from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
+from glimpse.render.mesh_raster import rasterize_triangles
+
+K_SMALL = np.array([[10.0, 0.0, 4.0], [0.0, 10.0, 4.0], [0.0, 0.0, 1.0]])
+
+
+def test_coverage_is_the_pixel_centres_inside_the_triangle():
+    # a right triangle whose legs pass through pixel centres: (1,1), (6,1), (1,6) in pixels at z = 2
+    corners_px = np.array([[1.0, 1.0], [6.0, 1.0], [1.0, 6.0]])
+    points = np.concatenate([(corners_px - 4.0) / 10.0 * 2.0, np.full((3, 1), 2.0)], axis=1)
+    raster = rasterize_triangles(points, np.array([[0, 1, 2]]), K_SMALL, 8, 8)
+    v, u = np.mgrid[0:8, 0:8]
+    expected = (u >= 1) & (v >= 1) & (u + v <= 7)
+    assert np.array_equal(raster.face >= 0, expected)
+    assert np.allclose(raster.depth[expected], 2.0) and np.isinf(raster.depth[~expected]).all()
+
+
+def test_depth_is_perspective_correct_on_a_tilted_plane():
+    # the plane z = 2 + 0.5 x (camera coordinates), a large triangle on it
+    xy = np.array([[-1.0, -1.0], [1.5, -1.0], [-1.0, 1.5]])
+    points = np.concatenate([xy, (2.0 + 0.5 * xy[:, 0])[:, None]], axis=1)
+    raster = rasterize_triangles(points, np.array([[0, 2, 1]]), K_SMALL, 8, 8)  # either winding
+    v, u = np.nonzero(raster.face >= 0)
+    ray_x = (u - 4.0) / 10.0  # x / z along the pixel's ray
+    assert len(u) > 20
+    assert np.allclose(raster.depth[v, u], 2.0 / (1.0 - 0.5 * ray_x))
+
+
+def test_nearest_body_and_depth_agree_with_the_opengl_renderer():
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    g = torch.Generator().manual_seed(0)
+    pose = 0.2 * torch.randn(1, 69, generator=g, dtype=torch.float64)
+    near = model(torch.zeros(1, 10, dtype=torch.float64), torch.zeros(1, 3, dtype=torch.float64), pose,
+                 torch.tensor([[0.0, 0.0, 3.0]], dtype=torch.float64)).vertices[0].numpy()
+    far = near + [0.3, 0.0, 1.0]
+    faces = model.faces.numpy()
+    K = intrinsics(320, 240, 60.0)
+    R, t = look_at_pose(np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.5, 3.0]))
+    raster = rasterize_triangles(np.concatenate([near, far]) @ R.T + t, np.concatenate([faces, faces + len(near)]),
+                                 K, 320, 240)
+    owner = np.where(raster.face >= 0, raster.face // len(faces), -1)
+    gl = render_meshes([Mesh(near, faces, np.ones((len(near), 3))), Mesh(far, faces, np.ones((len(far), 3)))],
+                       K, R, t, 320, 240, supersample=1)
+    covered = (gl.owner >= 0) | (owner >= 0)
+    assert covered.sum() > 3000 and (owner == 1).sum() > 500  # both bodies show
+    assert (owner != gl.owner).sum() <= 0.002 * covered.sum()
+    same = (owner == gl.owner) & (owner >= 0)
+    close = np.isclose(raster.depth[same], gl.depth[same], rtol=1e-3)
+    assert close.mean() > 0.995  # (a few silhouette pixels of one body can show different layers of it)
