@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -611,6 +612,10 @@ def test_image_helpers(tmp_path: Path) -> None:
     m = mask(16, 12).astype(bool)
     write_png(tmp_path / "mask.png", m)
     assert (read_mask(tmp_path / "mask.png") == m).all()
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert (tmp_path / "mask.png").stat().st_mode & 0o777 == 0o666 & ~umask  # as any new file, not 0600
+    assert not list(tmp_path.glob(".*.tmp"))
     info = probe_image(tmp_path / "mask.png")
     assert (info.format, info.mode, info.width, info.height, info.bit_depth) == ("PNG", "L", 16, 12, 8)
     cv2.imwrite(str(tmp_path / "deep.png"), np.zeros((4, 5, 3), np.uint16))

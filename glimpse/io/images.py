@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import os
 import re
-import tempfile
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -149,13 +149,15 @@ def write_png(path: str | Path, array: np.ndarray) -> None:
         raise ValueError(f"write_png needs an (H, W), (H, W, 3) or (H, W, 4) array; got {array.shape}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    # a unique hidden name beside the target, opened with "x" so the file gets the usual
+    # permissions (umask), unlike tempfile.mkstemp's 0600
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
     try:
-        with os.fdopen(fd, "wb") as handle:
+        with tmp.open("xb") as handle:
             Image.fromarray(np.ascontiguousarray(array)).save(handle, format="PNG")
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
