@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from glimpse.body.model import BodyModel
+from glimpse.errors import GlimpseError
 from glimpse.fixtures.scenes import FREE_BODY, make_scene
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.images import read_mask
@@ -125,3 +126,82 @@ def test_provided_masks_are_kept(lower_body):
         name = f"{fid:06d}.png"
         assert (read_mask(result / "masks" / "p0" / name) == read_mask(scene / "humans" / "p0" / "masks" / name)).all()
     assert read_mask(result / "occluders" / "p0" / "000012.png").sum() > 50  # the legs behind the table
+
+
+# ------------------------------------------------------------------------------------------ onnx-sam
+
+class _TinyEncoder(torch.nn.Module):
+    """SAM's encoder signature: [1, 3, 1024, 1024] -> [1, 256, 64, 64]."""
+
+    def __init__(self):
+        super().__init__()
+        self.project = torch.nn.Conv2d(3, 256, 1)
+
+    def forward(self, image):
+        return self.project(torch.nn.functional.avg_pool2d(image, 16))
+
+
+class _DiskDecoder(torch.nn.Module):
+    """SAM's decoder signature; its 'mask' is a disk of RADIUS pixels around the mean positive point,
+    mapped back from the 1024 frame to the original one (so the test sees the coordinate round trip)."""
+
+    RADIUS = 6.0
+
+    def __init__(self, height: int, width: int):
+        super().__init__()
+        self.height, self.width, self.scale = height, width, 1024.0 / max(height, width)
+
+    def forward(self, image_embeddings, point_coords, point_labels, mask_input, has_mask_input, orig_im_size):
+        positive = (point_labels == 1).float()[..., None]  # [1, N, 1]
+        centre = (point_coords * positive).sum(1) / positive.sum(1) / self.scale  # [1, 2] original pixels
+        v, u = torch.meshgrid(torch.arange(self.height, dtype=torch.float32),
+                              torch.arange(self.width, dtype=torch.float32), indexing="ij")
+        logits = self.RADIUS**2 - (u - centre[0, 0]) ** 2 - (v - centre[0, 1]) ** 2
+        tiny = 1e-6 * (image_embeddings.mean() + mask_input.mean() + has_mask_input.sum() + orig_im_size.sum())
+        masks = (logits + tiny)[None, None].repeat(1, 2, 1, 1)
+        masks[:, 1] = -1.0  # a second, worse candidate: the code must pick by iou_predictions
+        iou = torch.stack([torch.ones(()), torch.zeros(())])[None]
+        return masks, iou, torch.zeros(1, 2, 256, 256)
+
+
+def _export_tiny_sam(folder, height: int, width: int):
+    encoder, decoder = folder / "encoder.onnx", folder / "decoder.onnx"
+    torch.onnx.export(_TinyEncoder(), (torch.zeros(1, 3, 1024, 1024),), str(encoder), dynamo=False,
+                      input_names=["input_image"], output_names=["image_embeddings"])
+    inputs = (torch.zeros(1, 256, 64, 64), torch.zeros(1, 3, 2), torch.zeros(1, 3), torch.zeros(1, 1, 256, 256),
+              torch.zeros(1), torch.tensor([float(height), float(width)]))
+    torch.onnx.export(_DiskDecoder(height, width), inputs, str(decoder), dynamo=False,
+                      input_names=["image_embeddings", "point_coords", "point_labels", "mask_input", "has_mask_input",
+                                   "orig_im_size"], output_names=["masks", "iou_predictions", "low_res_masks"],
+                      dynamic_axes={"point_coords": {1: "points"}, "point_labels": {1: "points"}})
+    return encoder, decoder
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # torch.onnx's legacy exporter, used on purpose
+def test_sam_prompts_land_where_the_visible_joints_are(tmp_path):
+    from glimpse.masks.sam import SamOnnx
+
+    encoder, decoder = _export_tiny_sam(tmp_path, 48, 64)
+    sam = SamOnnx(encoder, decoder)
+    embedded = sam.embed(np.zeros((48, 64, 3), np.uint8))
+    assert embedded.embedding.shape == (1, 256, 64, 64) and embedded.scale == 16.0
+    mask = sam.segment(embedded, np.array([[20.0, 10.0], [30.0, 20.0]]), np.ones(2))
+    v, u = np.nonzero(mask)
+    assert mask.shape == (48, 64) and abs(u.mean() - 25.0) < 0.5 and abs(v.mean() - 15.0) < 0.5
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_onnx_sam_mode_runs_the_stage_and_needs_its_models(lower_body, tmp_path):
+    scene, out = lower_body
+    with pytest.raises(GlimpseError, match=r"03_masks.mode=onnx-sam needs 03_masks.sam_encoder_path"):
+        run("03_masks", scene, out, "03_masks.mode=onnx-sam")
+    encoder, decoder = _export_tiny_sam(tmp_path, 96, 128)
+    result = run("03_masks", scene, out,
+                 f"03_masks.mode=onnx-sam 03_masks.sam_encoder_path={encoder} 03_masks.sam_decoder_path={decoder}")
+    doc = read_json(result / "masks.json")
+    assert doc["mode"] == "onnx-sam" and doc["iou_vs_scene_masks"]["p0"] > 0.05  # a disk overlaps the person
+    mask = read_mask(result / "masks" / "p0" / "000012.png")
+    truth = read_mask(scene / "humans" / "p0" / "masks" / "000012.png")
+    v, u = np.nonzero(mask)
+    tv, tu = np.nonzero(truth)
+    assert abs(u.mean() - tu.mean()) < 4  # centred on the person, horizontally

@@ -8,7 +8,7 @@ from typing import Literal
 
 @dataclass(frozen=True)
 class MasksConfig:
-    mode: Literal["auto", "provided", "body"]
+    mode: Literal["auto", "provided", "body", "onnx-sam"]
     dilate_m: float
     refine: Literal["grabcut", "none"]
     grabcut_iterations: int
@@ -18,3 +18,5 @@ class MasksConfig:
     static_max_std: float
     static_erode_m: float
     static_motion_min_m: float
+    sam_encoder_path: str | None
+    sam_decoder_path: str | None

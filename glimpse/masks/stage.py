@@ -4,8 +4,9 @@ and the masks were computed) the IoU against them.
 
 Modes: ``provided`` uses the scene's masks (undistorted like the frames); ``body`` computes them
 from stage 02's bodies (glimpse.masks.assign) and, for a static camera, the frames' static-scene
-evidence (glimpse.masks.static); ``auto`` is ``provided`` when every person has a mask in every
-frame, else ``body``. Lengths in pipeline.yaml are metres at the person, turned into pixels per
+evidence (glimpse.masks.static); ``onnx-sam`` asks the user's Segment Anything model, prompted
+with each person's visible joints (glimpse.masks.sam); ``auto`` is ``provided`` when every person
+has a mask in every frame, else ``body``. Lengths in pipeline.yaml are metres at the person, turned into pixels per
 frame with the focal length, the pelvis depth and the person's scale (world units per metre).
 """
 
@@ -28,6 +29,7 @@ from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, provided_fr
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
 from glimpse.masks.refine import grabcut_region
+from glimpse.masks.sam import SamOnnx
 from glimpse.masks.static import SurfaceMotion, temporal_std
 from glimpse.scene import Scene
 
@@ -72,11 +74,12 @@ def static_scene(inputs: MasksInputs, config: MasksConfig) -> tuple[np.ndarray |
 
 
 def _posed(model: BodyModel, params: BodyParams, row: int) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices [V, 3], joints [24, 3]) of one frame, world frame."""
     with torch.no_grad():
         out = model(torch.as_tensor(params.betas)[None], torch.as_tensor(params.global_orient[row:row + 1]),
                     torch.as_tensor(params.body_pose[row:row + 1]), torch.as_tensor(params.transl[row:row + 1]),
                     scale=params.scale)
-    return out.vertices[0].numpy(), out.joints[0, 0].numpy()
+    return out.vertices[0].numpy(), out.joints[0].numpy()
 
 
 def _pixels(metres: float, camera: PinholeCamera, layers: BodyLayers, scales: np.ndarray) -> np.ndarray:
@@ -93,14 +96,36 @@ class _Frames:
         self.faces = inputs.model.faces.numpy()
         self.rows = {pid: {int(f): i for i, f in enumerate(inputs.bodies[pid].frame_ids)} for pid in self.pids}
 
-    def layers(self, fid: int) -> tuple[list[str], BodyLayers, np.ndarray]:
-        """(people present, their layers, their scales) in frame ``fid``."""
+    def layers(self, fid: int) -> tuple[list[str], BodyLayers, np.ndarray, list[np.ndarray]]:
+        """(people present, their layers, their scales, their joints [24, 3] world) in frame ``fid``."""
         present = [pid for pid in self.pids if fid in self.rows[pid]]
         posed = [_posed(self.inputs.model, self.inputs.bodies[pid], self.rows[pid][fid]) for pid in present]
         scene = self.inputs.scene
-        layers = body_layers([v for v, _ in posed], [p for _, p in posed], self.faces, self.inputs.cameras[fid],
+        layers = body_layers([v for v, _ in posed], [j[0] for _, j in posed], self.faces, self.inputs.cameras[fid],
                              scene.width, scene.height)
-        return present, layers, np.array([self.inputs.bodies[pid].scale for pid in present])
+        return present, layers, np.array([self.inputs.bodies[pid].scale for pid in present]), [j for _, j in posed]
+
+
+def sam_masks(sam: SamOnnx, image: np.ndarray, layers: BodyLayers, joints: list[np.ndarray],
+              camera: PinholeCamera) -> np.ndarray:
+    """[N, H, W] Segment Anything masks of the people present, nearest first (GTU's procedure): each
+    prompted with its projected joints where its body is the nearest, minus what nearer people took."""
+    height, width = layers.owner.shape
+    visible = np.zeros((len(joints), height, width), bool)
+    if not joints:
+        return visible
+    embedded = sam.embed(image)
+    taken = np.zeros((height, width), bool)
+    for p in np.argsort(layers.pelvis_depth, kind="stable"):
+        pixels, depth = camera.project(joints[p])
+        u, v = np.round(pixels[:, 0]).astype(int), np.round(pixels[:, 1]).astype(int)
+        inside = (depth > 0) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        seen = inside.copy()
+        seen[inside] = layers.owner[v[inside], u[inside]] == p
+        if seen.any():
+            visible[p] = sam.segment(embedded, pixels[seen], np.ones(int(seen.sum()))) & ~taken
+            taken |= visible[p]
+    return visible
 
 
 def surface_motion(frames: _Frames) -> SurfaceMotion:
@@ -108,7 +133,7 @@ def surface_motion(frames: _Frames) -> SurfaceMotion:
     scene, model = frames.inputs.scene, frames.inputs.model
     motion = SurfaceMotion(frames.pids, scene.height, scene.width, model.v_template.numpy()[frames.faces].mean(1))
     for fid in tqdm(sorted(frames.inputs.cameras), desc="03_masks body motion", unit="frame", leave=False):
-        present, layers, _ = frames.layers(fid)
+        present, layers, _, _ = frames.layers(fid)
         for k, pid in enumerate(present):
             motion.add(pid, layers.faces[k])
     return motion
@@ -126,18 +151,22 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
         moving = {pid: motion.moving(pid, config.static_motion_min_m) for pid in pids}
     undistorter = scene_undistorter(scene)
     frame_paths_cache = frame_paths(inputs.frames_dir)
+    sam = SamOnnx(config.sam_encoder_path, config.sam_decoder_path) if mode == "onnx-sam" else None
     frames_doc: dict[str, dict] = {}
     overlaps: dict[str, list[float]] = {pid: [] for pid in pids}
-    can_score = mode == "body" and all(person.masks for person in scene.humans.values())
+    can_score = mode != "provided" and all(person.masks for person in scene.humans.values())
     for fid in tqdm(sorted(inputs.cameras), desc="03_masks", unit="frame"):
         camera = inputs.cameras[fid]
-        present, layers, scales = frames.layers(fid)
+        present, layers, scales, joints = frames.layers(fid)
         erode = _pixels(config.static_erode_m, camera, layers, scales)
         occluder = _pixels(config.occluder_dilate_m, camera, layers, scales)
         if mode == "provided":
             given = np.stack([undistorter.mask(read_mask(scene.humans[pid].masks[fid])) for pid in present]) if present \
                 else np.zeros((0, scene.height, scene.width), bool)
             masks = provided_frame_masks(layers, given, erode, occluder)
+        elif mode == "onnx-sam":
+            image = read_rgb(frame_paths_cache[fid])
+            masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, occluder)
         else:
             dilate = _pixels(config.dilate_m, camera, layers, scales)
             in_front = near = None
