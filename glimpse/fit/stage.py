@@ -145,12 +145,6 @@ class Fitter:
         body = self.keypoint_body(layout)
         energy = FitEnergy(body, track, self.prior, joint_limits(self.model.dtype), self.config.weights,
                            self.config.max_interpolated_gap)
-        if not track.is_2d:
-            initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
-        elif person.keypoints3d is not None:
-            initial = self._initial_from_3d(person, track, body)
-        else:
-            initial = initial_state_2d(body, track, self.prior.mean)
         c = self.config
         if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
             raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
@@ -158,9 +152,16 @@ class Fitter:
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
                                tuple(c.robust_scale_anneal), self.fit_scale)
         try:
+            if not track.is_2d:
+                initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
+            elif person.keypoints3d is not None:
+                initial = self._initial_from_3d(person, track, body)
+            else:
+                initial = initial_state_2d(body, track, self.prior.mean)
             outcome = fit_track(energy, initial, schedule, who)
         except GlimpseError as exc:
-            raise GlimpseError(f"{exc} ({file})") from None
+            message = str(exc) if str(exc).startswith(who) else f"{who}: {exc}"
+            raise GlimpseError(f"{message} ({file})") from None
         params = self._with_gaps_filled(outcome, track.frame_ids.numpy())
         scale = params.scale
         info = {"layout": layout, "fitted_frames": len(track.frame_ids),

@@ -128,6 +128,29 @@ def sam_masks(sam: SamOnnx, image: np.ndarray, layers: BodyLayers, joints: list[
     return visible
 
 
+def body_mode_masks(config: MasksConfig, layers: BodyLayers, camera: PinholeCamera, scales: np.ndarray,
+                    static_evidence: tuple[np.ndarray, list[np.ndarray]] | None,
+                    image: np.ndarray | None) -> FrameMasks:
+    """One frame in body mode. static_evidence: (static pixels [H, W], per present person where its
+    body surface moves [H, W]) for a static camera; image [H, W, 3] for GrabCut refinement."""
+    dilate = _pixels(config.dilate_m, camera, layers, scales)
+    erode = _pixels(config.static_erode_m, camera, layers, scales)
+    in_front = near = None
+    if static_evidence is not None and len(layers.pelvis_depth):
+        static, moving = static_evidence
+        # static colour means scene (not person) only where the body there, or next to it, moves
+        in_front = np.stack([disk(full, erode[k], grow=False) & static & moving[k]
+                             for k, full in enumerate(layers.full)])
+        near = np.stack([static & disk(moving[k] & full, dilate[k]) for k, full in enumerate(layers.full)])
+    refine = None
+    if image is not None:
+        band = _pixels(config.grabcut_band_m, camera, layers, scales)
+        refine = lambda k, region, sure, forbidden: grabcut_region(  # noqa: E731
+            image, region, sure, forbidden, band[k], config.grabcut_iterations)
+    return body_frame_masks(layers, dilate, _pixels(config.occluder_dilate_m, camera, layers, scales), in_front,
+                            near, refine)
+
+
 def surface_motion(frames: _Frames) -> SurfaceMotion:
     """First pass over the frames: how the body surface under each pixel moves, per person."""
     scene, model = frames.inputs.scene, frames.inputs.model
@@ -168,21 +191,9 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
             image = read_rgb(frame_paths_cache[fid])
             masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, occluder)
         else:
-            dilate = _pixels(config.dilate_m, camera, layers, scales)
-            in_front = near = None
-            if moving is not None and present:
-                # static colour means scene (not person) only where the body there, or next to it, moves
-                in_front = np.stack([disk(layers.full[k], erode[k], grow=False) & static & moving[pid]
-                                     for k, pid in enumerate(present)])
-                near = np.stack([static & disk(moving[pid] & layers.full[k], dilate[k])
-                                 for k, pid in enumerate(present)])
-            refine = None
-            if config.refine == "grabcut":
-                image = read_rgb(frame_paths_cache[fid])
-                band = _pixels(config.grabcut_band_m, camera, layers, scales)
-                refine = lambda k, region, sure, forbidden: grabcut_region(  # noqa: E731
-                    image, region, sure, forbidden, band[k], config.grabcut_iterations)
-            masks = body_frame_masks(layers, dilate, occluder, in_front, near, refine)
+            image = read_rgb(frame_paths_cache[fid]) if config.refine == "grabcut" else None
+            static_evidence = None if moving is None else (static, [moving[pid] for pid in present])
+            masks = body_mode_masks(config, layers, camera, scales, static_evidence, image)
         _write_frame(out, fid, pids, present, masks, scene.height, scene.width)
         frames_doc[frame_name(fid)] = {
             "depth_order": [present[k] for k in masks.order],
