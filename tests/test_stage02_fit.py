@@ -50,6 +50,7 @@ def test_residuals_match_the_keypoint_noise(demo):
     in 3D and sigma*sqrt(pi/2) in 2D (visible, undropped keypoints)."""
     _, _, out = demo
     report = read_json(out / "humans" / "p0" / "fit_report.json")
+    assert report["format"] == "glimpse-fit-report/2"
     assert report["mode"] == "provided" and len(report["per_frame"]) == 6
     expected_3d = KEYPOINT_NOISE_3D_M * np.sqrt(8 / np.pi)
     expected_2d = KEYPOINT_NOISE_2D_PX_AT_320 * 64 / 320 * np.sqrt(np.pi / 2)

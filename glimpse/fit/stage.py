@@ -33,6 +33,7 @@ from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, su
 from glimpse.io.images import frame_name
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
 
+FIT_REPORT_FORMAT = "glimpse-fit-report/2"  # /2: residual keys carry their unit (_m, _px); fit stages added
 KEYPOINT_FILES = {"provided": "smpl.npz", "keypoints3d": "keypoints3d.npz", "keypoints2d": "keypoints2d.npz"}
 
 
@@ -119,7 +120,7 @@ class Fitter:
     def residual_report(self, person: HumanInputs, params: BodyParams, mode: str) -> dict:
         """Per-frame mean keypoint residuals of ``params`` against the scene's 3D (world units) and 2D
         (pixels) keypoints; interpolated frames are listed too (they were not fitted to those keypoints)."""
-        report: dict = {"format": "glimpse-fit-report/1", "person": person.pid, "mode": mode,
+        report: dict = {"format": FIT_REPORT_FORMAT, "person": person.pid, "mode": mode,
                         "frames": len(params.frame_ids), "units_3d": "world units (metres in a metric frame)"}
         per_frame: dict[int, dict] = {int(f): {"interpolated": bool(i)}
                                       for f, i in zip(params.frame_ids, params.interpolated)}

@@ -5,7 +5,7 @@ Inputs:  the scene (humans/<pid>/smpl.npz, keypoints3d.npz, keypoints2d.npz; fra
 Params:  02_smpl_fit, body, compute (pipeline.yaml).
 Outputs (OUT/<scene>/02_smpl_fit/, CONTRACTS.md):
   humans/<pid>/body.npz         glimpse-body-params/1 (betas, global_orient, body_pose, transl, scale, interpolated)
-  humans/<pid>/fit_report.json  glimpse-fit-report/1: mode, fit stages, per-frame keypoint residuals (m, px)
+  humans/<pid>/fit_report.json  glimpse-fit-report/2: mode, fit stages, per-frame keypoint residuals (m, px)
   overlay.mp4                   the fitted bodies over the input frames (02_smpl_fit.overlay)
 Modes per person: provided > keypoints3d > keypoints2d unless 02_smpl_fit.mode forces one (glimpse/fit/).
 """
