@@ -122,6 +122,14 @@ def _known_person(model, frames: int):
     return BodyParams(np.arange(frames), betas, orient, motion.body_pose, transl, 1.0, "free", np.zeros(frames, bool))
 
 
+def _posed_keypoints(body: KeypointBody, params: BodyParams):
+    """The body's joints and keypoints in every frame of ``params``."""
+    with torch.no_grad():
+        return body(torch.as_tensor(params.betas), torch.as_tensor(params.global_orient),
+                    torch.as_tensor(params.body_pose), torch.as_tensor(params.transl),
+                    torch.tensor(params.scale, dtype=F64))
+
+
 def _fit(model, config, prior, track, initial):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
@@ -144,9 +152,7 @@ def _truth(params):
 def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):
     truth = _known_person(model, 10)
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    with torch.no_grad():
-        points = body(torch.as_tensor(truth.betas), torch.as_tensor(truth.global_orient),
-                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    points = _posed_keypoints(body, truth)
     track = Track(torch.arange(10), torch.arange(10, dtype=F64) / 10, points.keypoints, torch.ones(10, 17, dtype=F64))
     outcome = _fit(model, config, prior, track, initial_state_3d(body, track, prior.mean, False))
     errors = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))
@@ -157,9 +163,7 @@ def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):
 def test_fit_to_clean_2d_keypoints_recovers_the_body_up_to_depth(model, config, prior):
     truth = _known_person(model, 10)
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    with torch.no_grad():
-        points = body(torch.as_tensor(truth.betas), torch.as_tensor(truth.global_orient),
-                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    points = _posed_keypoints(body, truth)
     K = intrinsics(320, 240, 60.0)
     R, t = look_at_pose(np.array([0.0, 1.5, -1.0]), np.array([0.3, 1.0, 3.5]))
     Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], 10, 0)) for a in (K, R, t))
@@ -211,9 +215,7 @@ def test_a_moving_camera_in_sfm_units_gives_the_person_scale(model, config, prio
     truth = BodyParams(truth.frame_ids, np.zeros(10), truth.global_orient, truth.body_pose, truth.transl, 1.0,
                        "free", truth.interpolated)
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    with torch.no_grad():
-        points = body(torch.zeros(10, dtype=F64), torch.as_tensor(truth.global_orient),
-                      torch.as_tensor(truth.body_pose), torch.as_tensor(truth.transl), torch.tensor(1.0, dtype=F64))
+    points = _posed_keypoints(body, truth)
     K = intrinsics(320, 240, 60.0)
     Rs, ts, pixels = [], [], []
     for f in range(frames):

@@ -11,15 +11,9 @@ from tqdm import tqdm
 from glimpse.body.model import BodyModel
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.overlay import PERSON_COLOURS, OverlayBody, overlay_frame
-from glimpse.io.images import read_rgb
+from glimpse.io.images import frame_files, read_rgb
 from glimpse.io.video import write_mp4
 from glimpse.scene import Scene
-
-
-def _frame_paths(frames_dir: Path) -> dict[int, Path]:
-    from glimpse.io.images import parse_frame_name
-
-    return {fid: p for p in frames_dir.iterdir() if (fid := parse_frame_name(p.stem)) is not None}
 
 
 def write_overlay_video(path: Path, scene: Scene, model: BodyModel, cameras: dict[int, PinholeCamera], fits: list,
@@ -27,7 +21,7 @@ def write_overlay_video(path: Path, scene: Scene, model: BodyModel, cameras: dic
     """One video frame per frame with a camera: the fitted bodies (fits: glimpse.fit.stage.PersonFit) and
     each person's confident observed 2D keypoints (pid -> (frame_ids [T], [T, K, 3] x, y, confidence)).
     frames_dir: stage 01's frames/. Returns the number of frames written."""
-    images = _frame_paths(frames_dir)
+    images = frame_files(frames_dir)
     faces = model.faces.numpy()
     rows = {fit.pid: {int(f): i for i, f in enumerate(fit.params.frame_ids)} for fit in fits}
 

@@ -175,3 +175,8 @@ def parse_frame_name(stem: str) -> int | None:
     if _FRAME_NAME.fullmatch(stem) is None:
         return None
     return int(stem)
+
+
+def frame_files(folder: str | Path) -> dict[int, Path]:
+    """Frame id -> file of a folder of frames named by id (stage 01's ``frames/``); other files are skipped."""
+    return {fid: p for p in Path(folder).iterdir() if (fid := parse_frame_name(p.stem)) is not None}

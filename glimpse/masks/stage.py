@@ -24,7 +24,7 @@ from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
-from glimpse.io.images import frame_name, parse_frame_name, read_mask, read_rgb, write_png
+from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, provided_frame_masks
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
@@ -57,17 +57,12 @@ def choose_mode(inputs: MasksInputs, config: MasksConfig) -> str:
     return config.mode
 
 
-def frame_paths(frames_dir: Path) -> dict[int, Path]:
-    return {fid: p for p in frames_dir.iterdir() if (fid := parse_frame_name(p.stem)) is not None}
-
-
-def static_scene(inputs: MasksInputs, config: MasksConfig) -> tuple[np.ndarray | None, str]:
-    """[H, W] bool static pixels (or None) and why."""
+def static_scene(inputs: MasksInputs, config: MasksConfig, paths: dict[int, Path]) -> tuple[np.ndarray | None, str]:
+    """[H, W] bool static pixels (or None) and why; paths: frame id -> stage 01's frame."""
     if not config.static_occluders:
         return None, "off (03_masks.static_occluders)"
     if inputs.camera_motion != "static":
         return None, "not available: the camera moves"
-    paths = frame_paths(inputs.frames_dir)
     std = temporal_std(read_rgb(paths[f]) for f in tqdm(sorted(inputs.cameras), desc="03_masks static scene",
                                                           unit="frame", leave=False))
     return std < config.static_max_std, f"temporal colour std < {config.static_max_std} over {len(inputs.cameras)} frames"
@@ -167,13 +162,18 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
     mode = choose_mode(inputs, config)
     scene, frames = inputs.scene, _Frames(inputs)
     pids = frames.pids
-    static, static_note = static_scene(inputs, config) if mode == "body" else (None, "not needed (provided masks)")
+    paths = frame_files(inputs.frames_dir)
+    static, static_note = static_scene(inputs, config, paths) if mode == "body" \
+        else (None, "not needed (provided or Segment Anything masks)")
     moving = None
     if static is not None:
         motion = surface_motion(frames)
         moving = {pid: motion.moving(pid, config.static_motion_min_m) for pid in pids}
     undistorter = scene_undistorter(scene)
-    frame_paths_cache = frame_paths(inputs.frames_dir)
+
+    def scene_mask(pid: str, fid: int) -> np.ndarray:
+        return undistorter.mask(read_mask(scene.humans[pid].masks[fid]))
+
     sam = SamOnnx(config.sam_encoder_path, config.sam_decoder_path) if mode == "onnx-sam" else None
     frames_doc: dict[str, dict] = {}
     overlaps: dict[str, list[float]] = {pid: [] for pid in pids}
@@ -184,14 +184,14 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
         erode = _pixels(config.static_erode_m, camera, layers, scales)
         occluder = _pixels(config.occluder_dilate_m, camera, layers, scales)
         if mode == "provided":
-            given = np.stack([undistorter.mask(read_mask(scene.humans[pid].masks[fid])) for pid in present]) if present \
+            given = np.stack([scene_mask(pid, fid) for pid in present]) if present \
                 else np.zeros((0, scene.height, scene.width), bool)
             masks = provided_frame_masks(layers, given, erode, occluder)
         elif mode == "onnx-sam":
-            image = read_rgb(frame_paths_cache[fid])
+            image = read_rgb(paths[fid])
             masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, occluder)
         else:
-            image = read_rgb(frame_paths_cache[fid]) if config.refine == "grabcut" else None
+            image = read_rgb(paths[fid]) if config.refine == "grabcut" else None
             static_evidence = None if moving is None else (static, [moving[pid] for pid in present])
             masks = body_mode_masks(config, layers, camera, scales, static_evidence, image)
         _write_frame(out, fid, pids, present, masks, scene.height, scene.width)
@@ -202,7 +202,7 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
         if can_score:
             for k, pid in enumerate(present):
                 if fid in scene.humans[pid].masks:
-                    truth = undistorter.mask(read_mask(scene.humans[pid].masks[fid]))
+                    truth = scene_mask(pid, fid)
                     union = (truth | masks.visible[k]).sum()
                     if union:
                         overlaps[pid].append(float((truth & masks.visible[k]).sum() / union))
