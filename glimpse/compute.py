@@ -36,3 +36,17 @@ def apply_compute(config: ComputeConfig) -> None:
         return
     torch.manual_seed(config.seed)
     torch.set_num_threads(threads)
+
+
+def resolve_device(config: ComputeConfig):
+    """The torch device of ``compute.device``: auto = CUDA when present, else the CPU; asking for
+    cuda on a machine without it is an error that says so."""
+    import torch
+
+    from glimpse.errors import ConfigError
+
+    if config.device == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("compute.device is cuda but torch sees no CUDA device here; use auto or cpu")
+    if config.device == "cpu" or not torch.cuda.is_available():
+        return torch.device("cpu")
+    return torch.device("cuda")

@@ -85,13 +85,14 @@ def test_make_all_runs_the_built_stages_and_stops_at_the_first_unimplemented_one
     from glimpse.fixtures.scenes import make_scene
 
     make_scene("demo", tmp_path / "scene", "tiny", seed=0)
-    result = _make("all", f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}")
+    result = _make("all", f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}",
+                   "PARAMS=04_bg_pretrain.schedule_scale=0.01")
     run_dir = tmp_path / "out" / "demo_tiny"
     assert result.returncode != 0
-    assert "stage 04_bg_pretrain is not implemented yet" in result.stderr
-    assert f"Finished stages (01_sfm, 02_smpl_fit, 03_masks) are in {run_dir}/" in result.stderr
+    assert "stage 05_textual_inversion is not implemented yet" in result.stderr
+    assert f"Finished stages (01_sfm, 02_smpl_fit, 03_masks, 04_bg_pretrain) are in {run_dir}/" in result.stderr
     assert "Traceback" not in result.stderr
-    assert (run_dir / "03_masks" / "manifest.json").is_file() and not (run_dir / "04_bg_pretrain").exists()
+    assert (run_dir / "04_bg_pretrain" / "manifest.json").is_file() and not (run_dir / "05_textual_inversion").exists()
 
 
 def test_broken_scene_is_refused_with_every_problem_and_no_traceback(tmp_path):

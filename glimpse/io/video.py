@@ -28,6 +28,7 @@ def write_mp4(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> int
     import imageio_ffmpeg
 
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".partial.mp4")
     writer, count, size = None, 0, None
     try:

@@ -3,6 +3,7 @@ every field has an entry, every entry a field)."""
 
 from __future__ import annotations
 
+from glimpse.background.config import BackgroundConfig
 from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
@@ -17,4 +18,5 @@ SECTION_CONFIGS: dict[str, type] = {
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,
+    "04_bg_pretrain": BackgroundConfig,
 }

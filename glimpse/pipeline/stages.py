@@ -58,7 +58,6 @@ STAGES: tuple[StageSpec, ...] = (
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
         shared=("compute", "render"),
         scene_inputs=(),
-        issue="#8 (stage 03 masks and stage 04 background)",
     ),
     StageSpec(
         "05_textual_inversion",

@@ -68,15 +68,19 @@ class Projected:
     visible: Tensor
 
 
-def quat_scale_to_covariance(quats: Tensor, scales: Tensor) -> Tensor:
-    """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ."""
+def quat_to_rotation(quats: Tensor) -> Tensor:
+    """quats [N, 4] wxyz (normalised here) -> rotation matrices [N, 3, 3]."""
     w, x, y, z = torch.nn.functional.normalize(quats, dim=-1).unbind(-1)
-    rotation = torch.stack([
+    return torch.stack([
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     ], dim=-1).reshape(-1, 3, 3)
-    scaled = rotation * scales[:, None, :]
+
+
+def quat_scale_to_covariance(quats: Tensor, scales: Tensor) -> Tensor:
+    """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ."""
+    scaled = quat_to_rotation(quats) * scales[:, None, :]
     return scaled @ scaled.transpose(1, 2)
 
 

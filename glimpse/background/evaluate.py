@@ -1,0 +1,113 @@
+"""After training: which Gaussians the input frames ever showed, the background alone from each
+input view, its PSNR on background pixels, and the pixels whose background was never seen.
+
+A Gaussian's *seen weight* is the sum, over every input frame's background pixels, of its
+blending weight there (the gradient of the masked sum of a colour channel with respect to
+its colour). Below ``never_seen_min_weight`` it is *never seen*: every frame shows it only
+behind people, so its colour is a guess (the init's).
+
+A *pixel* of an input view is never seen when the background surface rendered there (the
+point at the rendered depth) falls on a person, or outside the image, in every input frame;
+or when the background covers less than half of it. Frames that share one camera are tested
+together (for a static camera this is the pixels people cover in every frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from glimpse.background.train import TrainingView
+from glimpse.gaussians.model import GaussianModel
+from glimpse.metrics import psnr
+from glimpse.render import Camera, rasterize
+from glimpse.render.config import RenderConfig
+
+SEEN_COVERAGE = 0.5  # a pixel whose background alpha is below this counts as never seen
+
+
+def seen_weights(model: GaussianModel, views: list[TrainingView], render: RenderConfig) -> Tensor:
+    """[N] summed blending weight of each Gaussian over the background pixels of ``views``."""
+    inputs = {k: (v.detach() if isinstance(v, Tensor) else v) for k, v in model.render_inputs().items()}
+    inputs.pop("sh"), inputs.pop("sh_degree")
+    total = torch.zeros(len(model), device=model.means.device)
+    for view in views:
+        probe = torch.zeros(len(model), 3, device=model.means.device, requires_grad=True)
+        out = rasterize(view.camera, **inputs, colors=probe, backend=render.backend, antialiased=render.antialiased)
+        (out.rgb[..., 0] * view.background).sum().backward()
+        total += probe.grad[:, 0]
+    return total
+
+
+@dataclass
+class ViewResult:
+    """One input view: the background render [H, W, 3] uint8 (black where nothing covers), its PSNR (dB)
+    against the frame on background pixels, and never_seen [H, W] bool."""
+
+    frame_id: int
+    render: np.ndarray
+    psnr_background_db: float
+    never_seen: np.ndarray
+
+
+class SeenTest:
+    """Whether world points are shown on a background pixel by some input view; views sharing one
+    camera are merged (their background masks or-ed)."""
+
+    def __init__(self, views: list[TrainingView]):
+        self.cameras: list[Camera] = []
+        self.backgrounds: list[Tensor] = []
+        for view in views:
+            for k, camera in enumerate(self.cameras):
+                if _same_camera(camera, view.camera):
+                    self.backgrounds[k] = self.backgrounds[k] | view.background
+                    break
+            else:
+                self.cameras.append(view.camera)
+                self.backgrounds.append(view.background.clone())
+
+    def seen(self, points: Tensor) -> Tensor:
+        """points [P, 3] world -> [P] bool."""
+        seen = torch.zeros(len(points), dtype=torch.bool, device=points.device)
+        for camera, background in zip(self.cameras, self.backgrounds):
+            cam = points @ camera.R.T + camera.t
+            z = cam[:, 2]
+            uv = cam[:, :2] / z.clamp(min=camera.near)[:, None] * torch.stack([camera.K[0, 0], camera.K[1, 1]]) \
+                + camera.K[:2, 2]
+            u, v = uv.round().long().unbind(-1)
+            inside = (z > camera.near) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+            seen[inside] |= background[v[inside], u[inside]]
+        return seen
+
+
+def _same_camera(a: Camera, b: Camera) -> bool:
+    return (a.width, a.height) == (b.width, b.height) and all(
+        torch.equal(x, y) for x, y in ((a.K, b.K), (a.R, b.R), (a.t, b.t)))
+
+
+def backproject(camera: Camera, depth: Tensor) -> Tensor:
+    """depth [H, W] (camera z) -> world points [H*W, 3] at each pixel centre."""
+    v, u = torch.meshgrid(torch.arange(camera.height, device=depth.device, dtype=depth.dtype),
+                          torch.arange(camera.width, device=depth.device, dtype=depth.dtype), indexing="ij")
+    x = (u - camera.K[0, 2]) / camera.K[0, 0] * depth
+    y = (v - camera.K[1, 2]) / camera.K[1, 1] * depth
+    cam = torch.stack([x, y, depth], -1).reshape(-1, 3)
+    return (cam - camera.t) @ camera.R
+
+
+def render_views(model: GaussianModel, views: list[TrainingView], render: RenderConfig):
+    """Yield a :class:`ViewResult` per view (one at a time: a long video needs no memory for all)."""
+    test = SeenTest(views)
+    with torch.no_grad():
+        for view in views:
+            out = rasterize(view.camera, **model.render_inputs(), backend=render.backend,
+                            antialiased=render.antialiased)
+            rgb = out.rgb.clamp(0.0, 1.0)
+            value = psnr(rgb, view.target(), view.background) if bool(view.background.any()) else torch.tensor(float("nan"))
+            seen = test.seen(backproject(view.camera, out.depth)).reshape(out.alpha.shape)
+            never_seen = ~seen | (out.alpha < SEEN_COVERAGE)
+            yield ViewResult(view.frame_id, (rgb * 255.0).round().byte().cpu().numpy(), float(value),
+                             never_seen.cpu().numpy())

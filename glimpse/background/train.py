@@ -1,0 +1,199 @@
+"""The background training loop (3DGS's ``train.py`` restricted to background pixels).
+
+Each iteration renders one input view (frames in a fresh seeded order every epoch) over a
+background colour, compares it with the frame on the pixels no person covers:
+``(1 - w) * L1 (or MSE) + w * D-SSIM``, plus, for a sphere start, the radius regulariser
+``lambda * sum((|mu - c| - R)^2)``. Adam steps every parameter; adaptive density control
+and opacity resets follow the schedule; the active SH degree grows over time.
+
+Everything random is a function of (seed, iteration), and the state that changes is saved in
+checkpoints, so a run resumed from a checkpoint gives the same result as one never stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+from tqdm import tqdm
+
+from glimpse.background.config import BackgroundConfig
+from glimpse.background.init import Sphere
+from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
+from glimpse.gaussians.model import PARAMETER_NAMES, GaussianModel
+from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.losses import dssim_loss, l1_loss, mse_loss
+from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.render import Camera, rasterize
+from glimpse.render.config import RenderConfig
+
+log = logging.getLogger("glimpse")
+FIXED_COLOURS = {"black": (0.0, 0.0, 0.0), "white": (1.0, 1.0, 1.0)}
+LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
+
+
+@dataclass
+class TrainingView:
+    """One input frame: its camera, image [H, W, 3] uint8 and the pixels trained on, background [H, W] bool."""
+
+    frame_id: int
+    camera: Camera
+    image: Tensor
+    background: Tensor
+
+    def target(self) -> Tensor:
+        return self.image.float() / 255.0
+
+
+@dataclass
+class TrainingLog:
+    """What the run did: losses every LOSS_HISTORY_EVERY iterations, densification events, timing."""
+
+    losses: list[tuple[int, float]] = field(default_factory=list)
+    densify_events: list[dict] = field(default_factory=list)
+    resumed_from: int = 0
+    iterations_run: int = 0  # in this process (not counting those before a resume)
+    seconds: float = 0.0
+
+    @property
+    def iterations_per_s(self) -> float:
+        return self.iterations_run / self.seconds if self.seconds > 0 else 0.0
+
+
+def scene_extent(cameras: list[Camera], points: Tensor) -> float:
+    """3DGS's ``cameras_extent`` (1.1 x the largest distance of a camera centre from their mean), or,
+    when the cameras barely move (a static camera), the median distance of the initial points from the
+    cameras' mean centre, whichever is larger."""
+    centres = torch.stack([-(c.R.T @ c.t) for c in cameras])
+    mean = centres.mean(0)
+    spread = 1.1 * float((centres - mean).norm(dim=1).max())
+    return max(spread, float((points - mean.to(points)).norm(dim=1).median()))
+
+
+def training_background(config: BackgroundConfig, seed: int, step: int, device: torch.device) -> Tensor:
+    if config.background_colour in FIXED_COLOURS:
+        return torch.tensor(FIXED_COLOURS[config.background_colour], device=device)
+    return torch.as_tensor(np.random.default_rng([seed, step]).random(3), dtype=torch.float32, device=device)
+
+
+def view_order(seed: int, epoch: int, count: int) -> np.ndarray:
+    return np.random.default_rng([seed, epoch, 1]).permutation(count)
+
+
+def photometric_loss(config: BackgroundConfig, rendered: Tensor, target: Tensor, background: Tensor) -> Tensor:
+    """Loss over background pixels. For D-SSIM, pixels outside them are set to the (detached) render in
+    both images, so people never enter an SSIM window."""
+    pixel = l1_loss if config.photometric == "l1" else mse_loss
+    loss = pixel(rendered, target, background)
+    if config.dssim_weight > 0:
+        keep = background[..., None]
+        filler = rendered.detach()
+        structural = dssim_loss(torch.where(keep, rendered, filler)[None], torch.where(keep, target, filler)[None],
+                                background[None])
+        loss = (1.0 - config.dssim_weight) * loss + config.dssim_weight * structural
+    return loss
+
+
+def sphere_regulariser(means: Tensor, sphere: Sphere, weight: float) -> Tensor:
+    centre = torch.as_tensor(sphere.centre, dtype=means.dtype, device=means.device)
+    return weight * ((means - centre).norm(dim=1) - sphere.radius).square().sum()
+
+
+class BackgroundTrainer:
+    """Trains ``model`` on ``views``; ``checkpoint`` (a path) is read at start and written every
+    ``config.checkpoint_every`` iterations; ``key`` fingerprints the inputs and parameters."""
+
+    def __init__(self, model: GaussianModel, views: list[TrainingView], config: BackgroundConfig,
+                 render: RenderConfig, sphere: Sphere | None, seed: int, checkpoint: Path, key: str):
+        self.model, self.views, self.config, self.render = model, views, config, render
+        self.sphere, self.seed, self.checkpoint, self.key = sphere, seed, checkpoint, key
+        self.extent = scene_extent([v.camera for v in views], model.means.detach())
+        self.rates, self.densify = config.scaled_lr, config.scaled_densify
+        self.optimizer = make_optimizer(model, self.rates, self.extent)
+        self.stats = DensityStats(len(model), model.means.device)
+        self.log = TrainingLog()
+        self.step = 0
+
+    # --- checkpoints -------------------------------------------------------------------------
+
+    def _state(self) -> dict:
+        return {"step": self.step, "parameters": {k: v.detach().cpu() for k, v in self.model.parameter_dict().items()},
+                "optimizer": self.optimizer.state_dict(), "stats": {k: v.cpu() for k, v in self.stats.state_dict().items()},
+                "losses": self.log.losses, "densify_events": self.log.densify_events}
+
+    def _restore(self, state: dict) -> None:
+        device = self.model.means.device
+        self.model.replace_parameters({k: v.to(device) for k, v in state["parameters"].items()})
+        self.optimizer = make_optimizer(self.model, self.rates, self.extent)
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.stats.load_state_dict({k: v.to(device) for k, v in state["stats"].items()})
+        self.log.losses, self.log.densify_events = list(state["losses"]), list(state["densify_events"])
+        self.step = self.log.resumed_from = int(state["step"])
+
+    # --- one iteration -----------------------------------------------------------------------
+
+    def _iteration(self) -> float:
+        step, config = self.step + 1, self.config
+        set_position_lr(self.optimizer, self.rates, self.extent, step)
+        epoch, slot = divmod(step - 1, len(self.views))
+        view = self.views[int(view_order(self.seed, epoch, len(self.views))[slot])]
+        degree = min((step - 1) // config.scaled_sh_degree_every, self.render.sh_degree)
+        out = rasterize(view.camera, **self.model.render_inputs(degree),
+                        background=training_background(config, self.seed, step, view.image.device),
+                        backend=self.render.backend, antialiased=self.render.antialiased)
+        out.means2d.retain_grad()
+        loss = photometric_loss(config, out.rgb, view.target(), view.background)
+        total = loss + sphere_regulariser(self.model.means, self.sphere, config.sphere_reg_weight) if self.sphere else loss
+        total.backward()
+        with torch.no_grad():
+            if step < self.densify.stop and out.means2d.grad is not None:
+                self.stats.update(out.means2d.grad, out.radii, view.camera.width, view.camera.height)
+            self.optimizer.step()
+            self.optimizer.zero_grad(set_to_none=True)
+            self._density_control(step)
+        self.step = step
+        return float(loss.detach())
+
+    def _density_control(self, step: int) -> None:
+        d = self.densify
+        if d.densifies_at(step):
+            generator = torch.Generator(device=self.model.means.device).manual_seed(self.seed * 1_000_003 + step)
+            event = densify_and_prune(self.model, self.optimizer, self.stats, d, self.extent,
+                                      self.views[0].camera.height, d.prunes_large_at(step), generator)
+            self.log.densify_events.append({"iteration": step, **event})
+            self.stats = DensityStats(len(self.model), self.model.means.device)
+        if d.resets_opacity_at(step):
+            reset_opacity(self.model, self.optimizer, d.opacity_reset_value)
+
+    # --- the run -------------------------------------------------------------------------------
+
+    def run(self) -> TrainingLog:
+        total = self.config.total_iterations
+        state = load_checkpoint(self.checkpoint, self.key)
+        if state is not None:
+            self._restore(state)
+            log.info("resuming background training from iteration %d (%s)", self.step, self.checkpoint)
+        started = time.perf_counter()
+        bar = tqdm(total=total, initial=self.step, desc="04 background", unit="it", disable=None, leave=False)
+        while self.step < total:
+            loss = self._iteration()
+            if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
+                self.log.losses.append((self.step, round(loss, 6)))
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss:.4f}", gaussians=len(self.model), refresh=False)
+            if self.step % self.config.checkpoint_every == 0 and self.step < total:
+                save_checkpoint(self.checkpoint, self.key, self._state())
+                log.info("iteration %d/%d: loss %.4f, %d Gaussians (checkpoint saved)", self.step, total, loss,
+                         len(self.model))
+            self.log.iterations_run += 1
+        bar.close()
+        self.log.seconds = time.perf_counter() - started
+        return self.log
+
+
+__all__ = ["BackgroundTrainer", "TrainingView", "TrainingLog", "PARAMETER_NAMES", "scene_extent"]
