@@ -90,3 +90,26 @@ def _occluders(layers: BodyLayers, visible: np.ndarray, order: list[int], occlud
             hidden |= static_in_front[p] & ~visible[p]
         occluders[p] = disk(hidden, occluder_px[p])
     return occluders
+
+
+def plate_refiner(layers: BodyLayers, foreground: np.ndarray, known: np.ndarray, band_px: np.ndarray,
+                  core_px: np.ndarray, static: np.ndarray | None = None) -> Refiner:
+    """A static camera's refinement (glimpse.masks.plate): person p keeps the foreground pixels
+    [H, W] nearer (in the image) to its visible body than to any other and at most ``band_px[p]``
+    from it, its body's interior (eroded by ``core_px[p]``; colours like the plate's there are the
+    person's clothes, unless the pixel is ``static`` over the whole video: scene in front), and its
+    grown body where the plate is unknown (``known`` False)."""
+    if not len(layers.pelvis_depth):
+        return lambda p, region, sure, forbidden: region
+    distance = np.stack([cv2.distanceTransform((layers.owner != p).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
+                         for p in range(len(layers.pelvis_depth))])
+    nearest = distance.argmin(0)
+
+    def refine(p: int, region: np.ndarray, sure: np.ndarray, forbidden: np.ndarray) -> np.ndarray:
+        reach = (nearest == p) & (distance[p] <= band_px[p])
+        core = disk(layers.owner == p, core_px[p], grow=False)
+        if static is not None:
+            core &= ~static
+        return ((foreground & reach) | (region & ~known) | core) & ~forbidden
+
+    return refine

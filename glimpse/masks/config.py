@@ -10,9 +10,14 @@ from typing import Literal
 class MasksConfig:
     mode: Literal["auto", "provided", "body", "onnx-sam"]
     dilate_m: float
-    refine: Literal["grabcut", "none"]
+    refine: Literal["auto", "none", "grabcut", "plate"]
     grabcut_iterations: int
     grabcut_band_m: float
+    plate_threshold: float
+    plate_band_m: float
+    plate_core_m: float
+    plate_margin_m: float
+    plate_frames: int
     occluder_dilate_m: float
     static_occluders: bool
     static_max_std: float

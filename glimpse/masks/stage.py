@@ -25,10 +25,11 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
-from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, provided_frame_masks
+from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, plate_refiner, provided_frame_masks
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
 from glimpse.masks.refine import grabcut_region
+from glimpse.masks.plate import Plate, median_plate
 from glimpse.masks.sam import SamOnnx
 from glimpse.masks.static import SurfaceMotion, temporal_std
 from glimpse.scene import Scene
@@ -123,11 +124,20 @@ def sam_masks(sam: SamOnnx, image: np.ndarray, layers: BodyLayers, joints: list[
     return visible
 
 
-def body_mode_masks(config: MasksConfig, layers: BodyLayers, camera: PinholeCamera, scales: np.ndarray,
-                    static_evidence: tuple[np.ndarray, list[np.ndarray]] | None,
-                    image: np.ndarray | None) -> FrameMasks:
+def choose_refine(inputs: MasksInputs, config: MasksConfig) -> str:
+    if config.refine == "plate" and inputs.camera_motion != "static":
+        raise GlimpseError("03_masks.refine=plate needs a static camera (stage 01 found it moving); use auto, "
+                           "grabcut or none")
+    if config.refine == "auto":
+        return "plate" if inputs.camera_motion == "static" else "none"
+    return config.refine
+
+
+def body_mode_masks(config: MasksConfig, refine_kind: str, layers: BodyLayers, camera: PinholeCamera,
+                    scales: np.ndarray, static_evidence: tuple[np.ndarray, list[np.ndarray]] | None,
+                    image: np.ndarray | None, plate: Plate | None) -> FrameMasks:
     """One frame in body mode. static_evidence: (static pixels [H, W], per present person where its
-    body surface moves [H, W]) for a static camera; image [H, W, 3] for GrabCut refinement."""
+    body surface moves [H, W]) for a static camera; image [H, W, 3] for GrabCut or the plate."""
     dilate = _pixels(config.dilate_m, camera, layers, scales)
     erode = _pixels(config.static_erode_m, camera, layers, scales)
     in_front = near = None
@@ -138,23 +148,41 @@ def body_mode_masks(config: MasksConfig, layers: BodyLayers, camera: PinholeCame
                              for k, full in enumerate(layers.full)])
         near = np.stack([static & disk(moving[k] & full, dilate[k]) for k, full in enumerate(layers.full)])
     refine = None
-    if image is not None:
+    if refine_kind == "grabcut":
         band = _pixels(config.grabcut_band_m, camera, layers, scales)
         refine = lambda k, region, sure, forbidden: grabcut_region(  # noqa: E731
             image, region, sure, forbidden, band[k], config.grabcut_iterations)
+    elif refine_kind == "plate":
+        refine = plate_refiner(layers, plate.foreground(image, config.plate_threshold), plate.known,
+                               _pixels(config.plate_band_m, camera, layers, scales),
+                               _pixels(config.plate_core_m, camera, layers, scales),
+                               None if static_evidence is None else static_evidence[0])
     return body_frame_masks(layers, dilate, _pixels(config.occluder_dilate_m, camera, layers, scales), in_front,
                             near, refine)
 
 
-def surface_motion(frames: _Frames) -> SurfaceMotion:
-    """First pass over the frames: how the body surface under each pixel moves, per person."""
+def static_pass(frames: _Frames, config: MasksConfig, paths: dict[int, Path], motion_wanted: bool,
+                plate_wanted: bool) -> tuple[SurfaceMotion | None, Plate | None]:
+    """First pass over the frames (static camera): how the body surface under each pixel moves, per
+    person, and the background plate from the frames' pixels no grown body covers."""
     scene, model = frames.inputs.scene, frames.inputs.model
-    motion = SurfaceMotion(frames.pids, scene.height, scene.width, model.v_template.numpy()[frames.faces].mean(1))
-    for fid in tqdm(sorted(frames.inputs.cameras), desc="03_masks body motion", unit="frame", leave=False):
-        present, layers, _, _ = frames.layers(fid)
-        for k, pid in enumerate(present):
-            motion.add(pid, layers.faces[k])
-    return motion
+    motion = SurfaceMotion(frames.pids, scene.height, scene.width, model.v_template.numpy()[frames.faces].mean(1)) \
+        if motion_wanted else None
+    ids = sorted(frames.inputs.cameras)
+    picks = np.unique(np.linspace(0, len(ids) - 1, min(config.plate_frames, len(ids))).round().astype(int))
+    plate_ids = {ids[k] for k in picks} if plate_wanted else set()
+    images, covered = [], []
+    for fid in tqdm(ids, desc="03_masks static pass", unit="frame", leave=False):
+        present, layers, scales, _ = frames.layers(fid)
+        if motion is not None:
+            for k, pid in enumerate(present):
+                motion.add(pid, layers.faces[k])
+        if fid in plate_ids:
+            margin = _pixels(config.plate_margin_m, frames.inputs.cameras[fid], layers, scales)
+            images.append(read_rgb(paths[fid]))
+            grown = [disk(full, margin[k]) for k, full in enumerate(layers.full)]
+            covered.append(np.any(grown, axis=0) if grown else np.zeros((scene.height, scene.width), bool))
+    return motion, (median_plate(images, covered) if plate_wanted else None)
 
 
 def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
@@ -165,10 +193,12 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
     paths = frame_files(inputs.frames_dir)
     static, static_note = static_scene(inputs, config, paths) if mode == "body" \
         else (None, "not needed (provided or Segment Anything masks)")
-    moving = None
-    if static is not None:
-        motion = surface_motion(frames)
-        moving = {pid: motion.moving(pid, config.static_motion_min_m) for pid in pids}
+    refine_kind = choose_refine(inputs, config) if mode == "body" else "none"
+    moving = plate = None
+    if static is not None or refine_kind == "plate":
+        motion, plate = static_pass(frames, config, paths, static is not None, refine_kind == "plate")
+        if motion is not None:
+            moving = {pid: motion.moving(pid, config.static_motion_min_m) for pid in pids}
     undistorter = scene_undistorter(scene)
 
     def scene_mask(pid: str, fid: int) -> np.ndarray:
@@ -191,9 +221,9 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
             image = read_rgb(paths[fid])
             masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, occluder)
         else:
-            image = read_rgb(paths[fid]) if config.refine == "grabcut" else None
+            image = read_rgb(paths[fid]) if refine_kind != "none" else None
             static_evidence = None if moving is None else (static, [moving[pid] for pid in present])
-            masks = body_mode_masks(config, layers, camera, scales, static_evidence, image)
+            masks = body_mode_masks(config, refine_kind, layers, camera, scales, static_evidence, image, plate)
         _write_frame(out, fid, pids, present, masks, scene.height, scene.width)
         frames_doc[frame_name(fid)] = {
             "depth_order": [present[k] for k in masks.order],
@@ -206,7 +236,7 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
                     union = (truth | masks.visible[k]).sum()
                     if union:
                         overlaps[pid].append(float((truth & masks.visible[k]).sum() / union))
-    doc = {"format": MASKS_FORMAT, "mode": mode, "people": pids, "static_scene": static_note,
+    doc = {"format": MASKS_FORMAT, "mode": mode, "refine": refine_kind, "people": pids, "static_scene": static_note,
            "frames": frames_doc}
     if can_score:
         doc["iou_vs_scene_masks"] = {pid: (float(np.mean(v)) if v else None) for pid, v in overlaps.items()}
