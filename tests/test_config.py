@@ -85,3 +85,16 @@ def test_typed_config_is_strict():
         config_from_mapping(_Example, {**good, "extra": 1}, "x")
     with pytest.raises(ConfigError, match="missing key.*rate"):
         config_from_mapping(_Example, {k: v for k, v in good.items() if k != "rate"}, "x")
+
+
+def test_compute_device_resolves_to_cpu_here_and_refuses_a_missing_cuda():
+    import torch
+
+    from glimpse.compute import ComputeConfig, resolve_device
+
+    assert resolve_device(ComputeConfig("cpu", 1, 0)) == torch.device("cpu")
+    expected = "cuda" if torch.cuda.is_available() else "cpu"
+    assert resolve_device(ComputeConfig("auto", 1, 0)).type == expected
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="compute.device is cuda"):
+            resolve_device(ComputeConfig("cuda", 1, 0))

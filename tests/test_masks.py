@@ -167,6 +167,35 @@ def test_the_plate_needs_a_static_camera(tmp_path):
         run("03_masks", scene, tmp_path / "out", "03_masks.mode=body 03_masks.refine=plate")
 
 
+def test_people_hidden_behind_another_behind_the_camera_or_beside_the_frame(tmp_path):
+    """p1 takes p0's pose on the ray through p0's pelvis, 1.5 times as far (fully hidden), then
+    stands behind the camera, then far beside the frame: stages 03 and 04 run, p1's masks are empty."""
+    scene = make_scene("demo", tmp_path / "scene", "tiny", seed=0)
+    _, _, cameras = read_cameras_json(scene / "cameras.json")
+    centre = next(iter(cameras.values())).centre
+    p0, p1 = (dict(np.load(scene / "humans" / pid / "smpl.npz")) for pid in ("p0", "p1"))
+    thirds = np.array_split(np.arange(len(p1["frame_ids"])), 3)
+    for key in ("global_orient", "body_pose"):
+        p1[key][thirds[0]] = p0[key][thirds[0]]
+    p1["betas"] = p0["betas"]
+    p1["transl"][thirds[0]] = centre + 1.5 * (p0["transl"][thirds[0]] - centre)
+    p1["transl"][thirds[1]] = centre - np.array([0.0, 0.0, 3.0])  # behind the camera (it looks along +z)
+    p1["transl"][thirds[2]] = centre + np.array([15.0, 0.0, 2.0])  # beside the 60-degree field of view
+    np.savez(scene / "humans" / "p1" / "smpl.npz", **p1)
+    out = tmp_path / "out"
+    for stage, params in (("01_sfm", ""), ("02_smpl_fit", "02_smpl_fit.overlay=false"), ("03_masks", "03_masks.mode=body")):
+        result = run(stage, scene, out, params)
+    doc = read_json(result / "masks.json")
+    hidden = [f"{fid:06d}" for fid in p1["frame_ids"][thirds[0]]]
+    gone = [f"{fid:06d}" for fid in p1["frame_ids"][np.concatenate(thirds[1:])]]
+    assert all(doc["frames"][name]["visible_pixels"]["p1"] < 10 for name in hidden)
+    assert all(doc["frames"][name]["depth_order"][0] == "p0" for name in hidden)
+    assert all(not read_mask(result / "masks" / "p1" / f"{name}.png").any() for name in gone)
+    assert any(read_mask(result / "occluders" / "p1" / f"{name}.png").any() for name in hidden)
+    background = run("04_bg_pretrain", scene, out, "04_bg_pretrain.schedule_scale=0.005")
+    assert read_json(background / "report.json")["psnr_background_db"] > 10
+
+
 def test_provided_masks_are_kept(lower_body):
     scene, out = lower_body
     result = run("03_masks", scene, out)

@@ -1,6 +1,7 @@
-"""Stage 04 on fixture scenes: the textured sphere of a static camera, SfM points of a moving one,
-quality against the place rendered without people by the mesh renderer (no ghosts, never-seen
-regions found), resume after a kill, and clear errors."""
+"""Stage 04: the never-seen machinery against independent references, then the stage on fixture
+scenes: the textured sphere of a static camera, SfM points of a moving one, quality against the
+place rendered without people by the mesh renderer (no ghosts, never-seen regions found), resume
+after a kill, and clear errors."""
 
 from __future__ import annotations
 
@@ -12,15 +13,65 @@ import time
 
 import numpy as np
 import pytest
+import torch
 
+from glimpse.background.evaluate import SeenTest, backproject, seen_weights
+from glimpse.background.train import TrainingView
 from glimpse.background.truth import judge_background
 from glimpse.errors import GlimpseError
 from glimpse.fixtures.scenes import make_scene
+from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.ply import read_gaussians_ply
 from glimpse.io.video import read_mp4
+from glimpse.render import Camera, rasterize
+from glimpse.render.config import RenderConfig
 from tests.stage_helpers import REPO, read_json, run
 
 UPSTREAM = ("01_sfm", "02_smpl_fit", "03_masks")
+RENDER = RenderConfig(backend="auto", sh_degree=0, antialiased=False)
+
+
+def _camera(width: int = 32, height: int = 24) -> Camera:
+    K = torch.tensor([[30.0, 0, (width - 1) / 2], [0, 30.0, (height - 1) / 2], [0, 0, 1]])
+    return Camera(K, torch.eye(3), torch.zeros(3), width, height)
+
+
+def test_seen_weights_are_each_gaussians_blending_weight_over_background_pixels():
+    """The gradient trick against the forward pass: a one-hot colour renders a Gaussian's weights."""
+    g = torch.Generator().manual_seed(0)
+    n = 6
+    model = GaussianModel.from_points(torch.randn(n, 3, generator=g) * 0.3 + torch.tensor([0, 0, 3.0]),
+                                      torch.rand(n, 3, generator=g), torch.full((n,), 0.2), 0.6, sh_degree=0)
+    background = torch.zeros(24, 32, dtype=torch.bool)
+    background[:, :20] = True
+    view = TrainingView(0, _camera(), torch.zeros(24, 32, 3, dtype=torch.uint8), background)
+    weights = seen_weights(model, [view, view], RENDER)
+    inputs = {k: v.detach() for k, v in model.render_inputs().items() if k not in ("sh", "sh_degree")}
+    for i in range(n):
+        onehot = torch.zeros(n, 3)
+        onehot[i, 0] = 1.0
+        rendered = rasterize(view.camera, **inputs, colors=onehot).rgb[..., 0]
+        assert weights[i] == pytest.approx(2 * float(rendered[background].sum()), rel=1e-4, abs=1e-6)
+
+
+def test_backprojected_pixels_land_on_themselves_and_are_seen_where_the_background_is():
+    camera = _camera()
+    depth = torch.full((24, 32), 2.0) + torch.linspace(0, 1, 32)
+    points = backproject(camera, depth)
+    cam = points @ camera.R.T + camera.t
+    uv = cam[:, :2] / cam[:, 2:] * 30.0 + torch.tensor([15.5, 11.5])
+    v, u = torch.meshgrid(torch.arange(24.0), torch.arange(32.0), indexing="ij")
+    assert torch.allclose(uv, torch.stack([u, v], -1).reshape(-1, 2), atol=1e-4)
+    first = torch.zeros(24, 32, dtype=torch.bool)
+    first[:, :10] = True
+    second = torch.zeros(24, 32, dtype=torch.bool)
+    second[:, 20:] = True
+    views = [TrainingView(k, camera, torch.zeros(24, 32, 3, dtype=torch.uint8), bg) for k, bg in enumerate((first, second))]
+    seen = SeenTest(views).seen(points).reshape(24, 32)
+    assert len(SeenTest(views).cameras) == 1  # one camera: the two frames' masks are merged
+    assert torch.equal(seen, first | second)
+    behind = points - torch.tensor([0.0, 0.0, 10.0])  # behind the camera: never seen
+    assert not SeenTest(views).seen(behind).any()
 SHORT = "04_bg_pretrain.schedule_scale=0.02"  # 600 iterations: enough on these small scenes
 
 

@@ -31,8 +31,7 @@ SEEN_COVERAGE = 0.5  # a pixel whose background alpha is below this counts as ne
 
 def seen_weights(model: GaussianModel, views: list[TrainingView], render: RenderConfig) -> Tensor:
     """[N] summed blending weight of each Gaussian over the background pixels of ``views``."""
-    inputs = {k: (v.detach() if isinstance(v, Tensor) else v) for k, v in model.render_inputs().items()}
-    inputs.pop("sh"), inputs.pop("sh_degree")
+    inputs = {k: v.detach() for k, v in model.render_inputs().items() if k not in ("sh", "sh_degree")}
     total = torch.zeros(len(model), device=model.means.device)
     for view in views:
         probe = torch.zeros(len(model), 3, device=model.means.device, requires_grad=True)

@@ -151,16 +151,24 @@ def train_background(inputs: BackgroundInputs, config: BackgroundConfig, render:
 
 def _write_views(model: GaussianModel, views: list[TrainingView], render: RenderConfig,
                  config: BackgroundConfig, fps: float, out: Path) -> dict:
-    frames_doc, renders, always = {}, [], None
-    for result in render_views(model, views, render):
-        always = result.never_seen if always is None else always & result.never_seen
-        write_png(out / "never_seen" / f"{frame_name(result.frame_id)}.png", result.never_seen)
-        frames_doc[frame_name(result.frame_id)] = {"psnr_background_db": round(result.psnr_background_db, 3),
-                                                   "never_seen_fraction": round(float(result.never_seen.mean()), 5)}
-        if config.render_video:
-            renders.append(result.render)
+    """Render every input view once (streamed: the video never holds all frames in memory)."""
+    frames_doc: dict[str, dict] = {}
+    always: np.ndarray | None = None  # pixels never seen in each frame so far
+
+    def renders():
+        nonlocal always
+        for result in render_views(model, views, render):
+            always = result.never_seen if always is None else always & result.never_seen
+            write_png(out / "never_seen" / f"{frame_name(result.frame_id)}.png", result.never_seen)
+            frames_doc[frame_name(result.frame_id)] = {"psnr_background_db": round(result.psnr_background_db, 3),
+                                                       "never_seen_fraction": round(float(result.never_seen.mean()), 5)}
+            yield result.render
+
     if config.render_video:
-        write_mp4(out / "renders" / "background.mp4", renders, fps)
+        write_mp4(out / "renders" / "background.mp4", renders(), fps)
+    else:
+        for _ in renders():
+            pass
     values = [f["psnr_background_db"] for f in frames_doc.values() if np.isfinite(f["psnr_background_db"])]
     return {"format": REPORT_FORMAT, "psnr_background_db": round(float(np.mean(values)), 3) if values else None,
             "never_seen_fraction_mean": round(float(np.mean([f["never_seen_fraction"] for f in frames_doc.values()])), 5),

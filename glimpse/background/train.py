@@ -25,7 +25,7 @@ from tqdm import tqdm
 from glimpse.background.config import BackgroundConfig
 from glimpse.background.init import Sphere
 from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
-from glimpse.gaussians.model import PARAMETER_NAMES, GaussianModel
+from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
 from glimpse.losses import dssim_loss, l1_loss, mse_loss
 from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
@@ -195,5 +195,3 @@ class BackgroundTrainer:
         self.log.seconds = time.perf_counter() - started
         return self.log
 
-
-__all__ = ["BackgroundTrainer", "TrainingView", "TrainingLog", "PARAMETER_NAMES", "scene_extent"]

@@ -2,7 +2,9 @@
 Gaussians rendered from each input camera against the place rendered without its people by the
 mesh renderer (``<scene>.groundtruth/background/``), on three kinds of pixels:
 
-- *visible*: no person covers them in that frame (what the stage trained on);
+- *visible*: no person covers them in that frame and the stage reports them seen (the rest of
+  the visible pixels, hidden by the stage's grown masks in every frame, are never trained on:
+  their share is ``visible_reported_never_seen_fraction``);
 - *behind people*: a person covers them in that frame and the stage reports them seen (not in
   its ``never_seen/`` masks). A ghost (a person baked into the background) shows here; the
   input frame itself scores what a complete ghost would (``psnr_frame_behind_people_db``);
@@ -49,7 +51,7 @@ def judge_background(stage_dir: Path, sfm_dir: Path, scene: Path, static_camera:
     people = {fid: _people(scene, fid) for fid in cameras}
     never_truth = np.logical_and.reduce(list(people.values())) if static_camera else None
     scores: dict[str, list[float]] = {"visible": [], "behind": [], "frame_behind": []}
-    never_found = []
+    never_found, visible_unseen = [], []
     for fid, camera in sorted(cameras.items()):
         with torch.no_grad():
             out = rasterize(render_camera(camera, width, height, torch.device("cpu")), **model.render_inputs())
@@ -58,11 +60,14 @@ def judge_background(stage_dir: Path, sfm_dir: Path, scene: Path, static_camera:
         found = read_mask(stage_dir / "never_seen" / f"{frame_name(fid)}.png")
         never_found.append(found)
         behind = people[fid] & ~found
-        for key, value in (("visible", _psnr(rendered, truth, ~people[fid])), ("behind", _psnr(rendered, truth, behind)),
+        visible_unseen.append(float((~people[fid] & found).sum() / max((~people[fid]).sum(), 1)))
+        for key, value in (("visible", _psnr(rendered, truth, ~people[fid] & ~found)),
+                           ("behind", _psnr(rendered, truth, behind)),
                            ("frame_behind", _psnr(read_rgb(frames[fid]).astype(np.float64), truth, behind))):
             if value is not None:
                 scores[key].append(value)
     doc = {REPORT_KEYS[k]: (round(float(np.mean(v)), 3) if v else None) for k, v in scores.items()}
+    doc["visible_reported_never_seen_fraction"] = round(float(np.mean(visible_unseen)), 5)
     if never_truth is not None:
         found_all = np.logical_and.reduce(never_found)
         doc["never_seen_truth_fraction"] = round(float(never_truth.mean()), 5)

@@ -32,8 +32,9 @@ class FrameMasks:
 
 
 def disk(mask: np.ndarray, radius_px: float, grow: bool = True) -> np.ndarray:
-    """mask [H, W] bool dilated (grow) or eroded by a disk of ``radius_px`` (rounded; 0 = unchanged)."""
-    radius = int(round(radius_px))
+    """mask [H, W] bool dilated (grow) or eroded by a disk of ``radius_px`` (rounded; 0 = unchanged;
+    at most the mask's larger side, beyond which a disk changes nothing more)."""
+    radius = int(round(min(radius_px, max(mask.shape))))
     if radius <= 0:
         return mask.copy()
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))

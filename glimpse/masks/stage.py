@@ -35,6 +35,7 @@ from glimpse.masks.static import SurfaceMotion, temporal_std
 from glimpse.scene import Scene
 
 MASKS_FORMAT = "glimpse-masks/1"
+MIN_PELVIS_DEPTH = 1e-3  # world units: a pelvis nearer than this to the camera plane grows nothing
 
 
 @dataclass(frozen=True)
@@ -79,9 +80,12 @@ def _posed(model: BodyModel, params: BodyParams, row: int) -> tuple[np.ndarray, 
 
 
 def _pixels(metres: float, camera: PinholeCamera, layers: BodyLayers, scales: np.ndarray) -> np.ndarray:
-    """[N] a length in metres at each person, in pixels at its pelvis depth."""
+    """[N] a length in metres at each person, in pixels at its pelvis depth (0 for a pelvis at or
+    behind the camera, whose body has no pixels to grow)."""
     focal = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
-    return focal * metres * scales / np.maximum(layers.pelvis_depth, 1e-6)
+    depth = layers.pelvis_depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(depth > MIN_PELVIS_DEPTH, focal * metres * scales / depth, 0.0)
 
 
 class _Frames:
