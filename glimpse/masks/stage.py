@@ -3,11 +3,12 @@ person's occluder mask, written as PNGs, with the depth order and (where the sce
 and the masks were computed) the IoU against them.
 
 Modes: ``provided`` uses the scene's masks (undistorted like the frames); ``body`` computes them
-from stage 02's bodies (glimpse.masks.assign) and, for a static camera, the frames' static-scene
-evidence (glimpse.masks.static); ``onnx-sam`` asks the user's Segment Anything model, prompted
-with each person's visible joints (glimpse.masks.sam); ``auto`` is ``provided`` when every person
-has a mask in every frame, else ``body``. Lengths in pipeline.yaml are metres at the person, turned into pixels per
-frame with the focal length, the pelvis depth and the person's scale (world units per metre).
+from stage 02's bodies (glimpse.masks.assign) and, for a static camera, the frames' background
+plate (glimpse.masks.plate) and static-scene evidence (glimpse.masks.static); ``onnx-sam`` asks
+the user's Segment Anything model, prompted with each person's visible joints
+(glimpse.masks.sam); ``auto`` is ``provided`` when every person has a mask in every frame, else
+``body``. Lengths in pipeline.yaml are metres at the person, turned into pixels per frame with the
+focal length, the pelvis depth and the person's scale (world units per metre).
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, writ
 from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, plate_refiner, provided_frame_masks
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
-from glimpse.masks.refine import grabcut_region
 from glimpse.masks.plate import Plate, median_plate
+from glimpse.masks.refine import grabcut_region
 from glimpse.masks.sam import SamOnnx
 from glimpse.masks.static import SurfaceMotion, temporal_std
 from glimpse.scene import Scene
