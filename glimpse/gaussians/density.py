@@ -167,15 +167,10 @@ def _split_children(params: dict[str, Tensor], index: Tensor, generator: torch.G
 
 
 def reset_opacity(model: GaussianModel, optimizer: torch.optim.Optimizer, ceiling: float) -> None:
-    """Opacities above ``ceiling`` drop to it; the opacity's Adam moments restart (3DGS)."""
+    """Opacities above ``ceiling`` drop to it (in place); the opacity's Adam moments restart (3DGS)."""
     with torch.no_grad():
-        tensors = {name: param.detach() for name, param in model.parameter_dict().items()}
-        tensors["opacity_logits"] = torch.clamp_max(tensors["opacity_logits"], logit(ceiling))
-        for group in optimizer.param_groups:
-            if group["name"] == "opacity_logits":
-                state = optimizer.state.get(group["params"][0])
-                if state:
-                    state["exp_avg"].zero_()
-                    state["exp_avg_sq"].zero_()
-        index = torch.arange(len(model), device=model.means.device)
-        reindex(model, optimizer, tensors, index, torch.zeros(len(model), dtype=torch.bool, device=index.device))
+        model.opacity_logits.clamp_(max=logit(ceiling))
+    state = optimizer.state.get(model.opacity_logits)
+    if state:
+        state["exp_avg"].zero_()
+        state["exp_avg_sq"].zero_()

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from glimpse import __version__
+from glimpse.config import config_from_mapping
 from glimpse.errors import GlimpseError, NotImplementedStageError
 from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, prepare_run
 from glimpse.pipeline.stages import STAGE_NAMES, stage_spec
@@ -53,6 +54,13 @@ class StageContext:
     formats: dict[str, str] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
+
+    def section(self, name: str) -> Any:
+        """pipeline.yaml section ``name`` (this stage's own or a shared one) as its typed config
+        (the class glimpse.pipeline.sections registers for it), built strictly."""
+        from glimpse.pipeline.sections import SECTION_CONFIGS
+
+        return config_from_mapping(SECTION_CONFIGS[name], self.params[name], f"pipeline.yaml {name}")
 
     def upstream_dir(self, stage: str) -> Path:
         """The published output folder of an upstream stage."""

@@ -16,10 +16,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.cameras.config import CamerasConfig  # noqa: E402
 from glimpse.cameras.stage import estimate_cameras  # noqa: E402
-from glimpse.compute import ComputeConfig, apply_compute, resolved_threads  # noqa: E402
-from glimpse.config import config_from_mapping  # noqa: E402
+from glimpse.compute import apply_compute, resolved_threads  # noqa: E402
 from glimpse.io.cameras_json import CAMERAS_FORMAT, write_cameras_json  # noqa: E402
 from glimpse.io.colmap_text import write_colmap_text  # noqa: E402
 from glimpse.io.ply_points import POINTS_FORMAT, write_points_ply  # noqa: E402
@@ -31,8 +29,8 @@ REPORT_FORMAT = "glimpse-cameras-report/1"
 
 
 def run(ctx: StageContext) -> None:
-    config = config_from_mapping(CamerasConfig, ctx.params[STAGE], f"pipeline.yaml {STAGE}")
-    compute = config_from_mapping(ComputeConfig, ctx.params["compute"], "pipeline.yaml compute")
+    config = ctx.section(STAGE)
+    compute = ctx.section("compute")
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     with ctx.timed("stage"):

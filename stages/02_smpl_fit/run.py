@@ -18,12 +18,10 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import BodyConfig, resolve_model_path  # noqa: E402
+from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.params import BODY_PARAMS_FORMAT, write_body_params  # noqa: E402
-from glimpse.compute import ComputeConfig, apply_compute  # noqa: E402
-from glimpse.config import config_from_mapping  # noqa: E402
-from glimpse.fit.config import FitConfig  # noqa: E402
+from glimpse.compute import apply_compute  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
 from glimpse.fit.video import write_overlay_video  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
@@ -34,9 +32,9 @@ STAGE = "02_smpl_fit"
 
 
 def run(ctx: StageContext) -> None:
-    config = config_from_mapping(FitConfig, ctx.params[STAGE], f"pipeline.yaml {STAGE}")
-    body = config_from_mapping(BodyConfig, ctx.params["body"], "pipeline.yaml body")
-    apply_compute(config_from_mapping(ComputeConfig, ctx.params["compute"], "pipeline.yaml compute"))
+    config = ctx.section(STAGE)
+    body = ctx.section("body")
+    apply_compute(ctx.section("compute"))
     scene = load_scene(ctx.scene_root)
     cameras_dir = ctx.upstream_dir("01_sfm")
     _, _, cameras = read_cameras_json(cameras_dir / "cameras.json")

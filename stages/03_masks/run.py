@@ -17,13 +17,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import BodyConfig, resolve_model_path  # noqa: E402
+from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.params import read_body_params  # noqa: E402
-from glimpse.compute import ComputeConfig, apply_compute  # noqa: E402
-from glimpse.config import config_from_mapping  # noqa: E402
+from glimpse.compute import apply_compute  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
-from glimpse.masks.config import MasksConfig  # noqa: E402
 from glimpse.masks.stage import MASKS_FORMAT, MasksInputs, compute_masks  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
@@ -32,9 +30,9 @@ STAGE = "03_masks"
 
 
 def run(ctx: StageContext) -> None:
-    config = config_from_mapping(MasksConfig, ctx.params[STAGE], f"pipeline.yaml {STAGE}")
-    body = config_from_mapping(BodyConfig, ctx.params["body"], "pipeline.yaml body")
-    apply_compute(config_from_mapping(ComputeConfig, ctx.params["compute"], "pipeline.yaml compute"))
+    config = ctx.section(STAGE)
+    body = ctx.section("body")
+    apply_compute(ctx.section("compute"))
     scene = load_scene(ctx.scene_root)
     sfm, fits = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")

@@ -18,25 +18,22 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.background.config import BackgroundConfig  # noqa: E402
 from glimpse.background.stage import BackgroundInputs, train_background, write_json  # noqa: E402
 from glimpse.body.params import read_body_params  # noqa: E402
-from glimpse.compute import ComputeConfig, apply_compute, resolve_device  # noqa: E402
-from glimpse.config import config_from_mapping  # noqa: E402
+from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.gaussians.ply import GAUSSIANS_FORMAT, write_gaussians_ply  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
-from glimpse.render.config import RenderConfig  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "04_bg_pretrain"
 
 
 def run(ctx: StageContext) -> None:
-    config = config_from_mapping(BackgroundConfig, ctx.params[STAGE], f"pipeline.yaml {STAGE}")
-    render = config_from_mapping(RenderConfig, ctx.params["render"], "pipeline.yaml render")
-    compute = config_from_mapping(ComputeConfig, ctx.params["compute"], "pipeline.yaml compute")
+    config = ctx.section(STAGE)
+    render = ctx.section("render")
+    compute = ctx.section("compute")
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
