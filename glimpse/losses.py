@@ -56,6 +56,15 @@ def dssim_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tens
     return 1.0 - _pooled_mean(full, mask)
 
 
+def dssim_loss_on(pred: Tensor, target: Tensor, keep: Tensor) -> Tensor:
+    """D-SSIM over the pixels of ``keep [H, W]`` (bool) of ``pred, target [H, W, 3]``. Pixels outside
+    ``keep`` are set to the (detached) render in both images first, so what lies there (people for the
+    background, a static occluder for a person) never enters an SSIM window."""
+    inside = keep[..., None]
+    filler = pred.detach()
+    return dssim_loss(torch.where(inside, pred, filler)[None], torch.where(inside, target, filler)[None], keep[None])
+
+
 def lpips_loss(lpips_module: LPIPS, pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
     """Mean LPIPS distance (raw, not x100) over the batch.
 

@@ -12,6 +12,7 @@ import yaml
 from glimpse.errors import GlimpseError
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.images import read_rgb
+from glimpse.pipeline.stages import STAGE_NAMES
 from tests.stage_helpers import REPO, read_json, run
 from tests.support.synthetic_room import make_room_scene
 
@@ -81,18 +82,21 @@ def _make(*args, cwd=REPO):
                           capture_output=True, text=True, timeout=600)
 
 
-def test_make_all_runs_the_built_stages_and_stops_at_the_first_unimplemented_one(tmp_path):
+def test_make_all_runs_every_stage_and_a_parameter_change_reruns_only_what_follows(tmp_path):
     from glimpse.fixtures.scenes import make_scene
 
     make_scene("demo", tmp_path / "scene", "tiny", seed=0)
-    result = _make("all", f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}",
-                   "PARAMS=04_bg_pretrain.schedule_scale=0.01")
+    short = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.005"
+    args = (f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}")
+    result = _make("all", *args, f"PARAMS={short}")
     run_dir = tmp_path / "out" / "demo_tiny"
-    assert result.returncode != 0
-    assert "stage 05_textual_inversion is not implemented yet" in result.stderr
-    assert f"Finished stages (01_sfm, 02_smpl_fit, 03_masks, 04_bg_pretrain) are in {run_dir}/" in result.stderr
+    assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
-    assert (run_dir / "04_bg_pretrain" / "manifest.json").is_file() and not (run_dir / "05_textual_inversion").exists()
+    stamps = {stage: (run_dir / stage / "manifest.json").stat().st_mtime_ns for stage in STAGE_NAMES}
+    result = _make("all", *args, f"PARAMS={short} 07_eval.input_view_every=2")
+    assert result.returncode == 0, result.stderr
+    changed = {stage for stage in STAGE_NAMES if (run_dir / stage / "manifest.json").stat().st_mtime_ns != stamps[stage]}
+    assert changed == {"07_eval"}
 
 
 def test_broken_scene_is_refused_with_every_problem_and_no_traceback(tmp_path):

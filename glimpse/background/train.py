@@ -27,7 +27,7 @@ from glimpse.background.init import Sphere
 from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
-from glimpse.losses import dssim_loss, l1_loss, mse_loss
+from glimpse.losses import dssim_loss_on, l1_loss, mse_loss
 from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
@@ -91,11 +91,7 @@ def photometric_loss(config: BackgroundConfig, rendered: Tensor, target: Tensor,
     pixel = l1_loss if config.photometric == "l1" else mse_loss
     loss = pixel(rendered, target, background)
     if config.dssim_weight > 0:
-        keep = background[..., None]
-        filler = rendered.detach()
-        structural = dssim_loss(torch.where(keep, rendered, filler)[None], torch.where(keep, target, filler)[None],
-                                background[None])
-        loss = (1.0 - config.dssim_weight) * loss + config.dssim_weight * structural
+        loss = (1.0 - config.dssim_weight) * loss + config.dssim_weight * dssim_loss_on(rendered, target, background)
     return loss
 
 

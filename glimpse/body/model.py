@@ -156,7 +156,7 @@ class BodyModel(torch.nn.Module):
         return BodyOutput(
             vertices=s * out.vertices + t,
             joints=s * out.joints + t,
-            transforms=_scaled_translated(out.transforms, scale_b, transl_b),
+            transforms=scaled_translated(out.transforms, scale_b, transl_b),
             rest_vertices=out.rest_vertices,
             rest_joints=out.rest_joints,
         )
@@ -180,7 +180,7 @@ class BodyModel(torch.nn.Module):
         raise ValueError(f"BodyModel: {name} must be [{want}] or {one}, found {tuple(tensor.shape)}")
 
 
-def _scaled_translated(transforms: Tensor, scale: Tensor, transl: Tensor) -> Tensor:
+def scaled_translated(transforms: Tensor, scale: Tensor, transl: Tensor) -> Tensor:
     """[[s I, t], [0, 1]] @ transforms: [B, J, 4, 4], scale [B], transl [B, 3] -> [B, J, 4, 4]."""
     top = scale[:, None, None, None] * transforms[..., :3, :]  # [B, J, 3, 4]
     translation = top[..., 3] + transl[:, None, :]  # [B, J, 3]

@@ -81,6 +81,10 @@ class DensityStats:
         self.views[drawn] += 1
         self.max_radii[drawn] = torch.maximum(self.max_radii[drawn], radii[drawn].to(self.max_radii))
 
+    def keep(self, rows: Tensor) -> None:
+        """Keep the statistics of the Gaussians where ``rows [N]`` (bool) is True (after a pruning)."""
+        self.grad_sum, self.views, self.max_radii = self.grad_sum[rows], self.views[rows], self.max_radii[rows]
+
     def mean_grad(self) -> Tensor:
         return torch.where(self.views > 0, self.grad_sum / self.views.clamp(min=1), torch.zeros_like(self.grad_sum))
 

@@ -7,16 +7,24 @@ from glimpse.background.config import BackgroundConfig
 from glimpse.body.config import BodyConfig
 from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
+from glimpse.crops.config import CropsConfig
+from glimpse.eval.config import EvalConfig
 from glimpse.fit.config import FitConfig
+from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
+from glimpse.prior.config import PriorConfig
 from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
     "compute": ComputeConfig,
     "body": BodyConfig,
     "render": RenderConfig,
+    "prior": PriorConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,
     "04_bg_pretrain": BackgroundConfig,
+    "05_textual_inversion": CropsConfig,
+    "06_joint_opt": JointConfig,
+    "07_eval": EvalConfig,
 }

@@ -62,28 +62,25 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "05_textual_inversion",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute", "body"),
+        shared=("compute", "body", "prior"),
         scene_inputs=("humans/*/reference/*",),
-        issue="#9 (stage 05 crops, stage 06 joint optimisation, stage 07 metrics)",
     ),
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute", "body", "render"),
+        shared=("compute", "body", "render", "prior"),
         scene_inputs=(),
-        issue="#9 (stage 05 crops, stage 06 joint optimisation, stage 07 metrics)",
     ),
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "06_joint_opt"),
         shared=("compute", "body", "render"),
         scene_inputs=("eval/**/*",),
-        issue="#9 (stage 07 metrics) and #11 (renders, edits, exports)",
     ),
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render")
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior")
 
 
 def stage_spec(name: str) -> StageSpec:

@@ -1,6 +1,14 @@
-"""Stage 05_textual_inversion: per-person crops and identity for the diffusion prior.
+"""Stage 05: per-person crops (image, soft mask, OpenPose-18 skeleton, view prompt) for the identity prior.
 
-Not implemented yet: running it stops the pipeline with a clear message and writes nothing.
+Inputs:  01_sfm/ (frames, cameras.json), 02_smpl_fit/humans/<pid>/body.npz, 03_masks/masks/<pid>/.
+Params:  05_textual_inversion, prior, body, compute (pipeline.yaml).
+Outputs (OUT/<scene>/05_textual_inversion/, CONTRACTS.md):
+  <pid>/crops/images/<frame>.png     the person cropped square, background a random colour per crop (RGB)
+  <pid>/crops/masks/<frame>.png      its soft mask (0-255): eroded, feathered
+  <pid>/crops/skeletons/<frame>.png  OpenPose-18 drawing of its posed body (ControlNet's convention)
+  <pid>/crops/crops.json             glimpse-crops/1: per crop the frame, box, view, azimuth, prompt, keypoints
+Identity: trained only with prior.kind sds (issue #12, an error for now); any other prior skips it and the
+manifest's summary says so. Method: docs/crops.md, glimpse/crops/.
 """
 
 import sys
@@ -8,7 +16,44 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.pipeline.runner import stage_main  # noqa: E402
+from glimpse.body.config import resolve_model_path  # noqa: E402
+from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.params import read_body_params  # noqa: E402
+from glimpse.compute import apply_compute  # noqa: E402
+from glimpse.crops.stage import CROPS_FORMAT, CropsInputs, identity_plan, person_summary, write_crops  # noqa: E402
+from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
+from glimpse.scene import load_scene  # noqa: E402
+
+STAGE = "05_textual_inversion"
+
+
+def run(ctx: StageContext) -> None:
+    config = ctx.section(STAGE)
+    compute = ctx.section("compute")
+    plan = identity_plan(ctx.section("prior").kind)  # before any work: sds is refused
+    apply_compute(compute)
+    scene = load_scene(ctx.scene_root)
+    sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
+    _, _, cameras = read_cameras_json(sfm / "cameras.json")
+    import torch
+
+    model = BodyModel.from_file(resolve_model_path(ctx.section("body")), dtype=torch.float64)
+    pids = sorted(scene.humans)
+    bodies = {pid: read_body_params(fits / "humans" / pid / "body.npz") for pid in pids}
+    inputs = CropsInputs(pids, model, cameras, bodies, sfm / "frames", masks / "masks")
+    with ctx.timed("crops"):
+        docs = write_crops(inputs, config, compute.seed, ctx.out)
+    for pid in pids:
+        ctx.formats[f"{pid}/crops/crops.json"] = CROPS_FORMAT
+        ctx.formats[f"{pid}/crops/images/"] = "png (RGB)"
+        ctx.formats[f"{pid}/crops/masks/"] = "png (0-255 soft mask)"
+        ctx.formats[f"{pid}/crops/skeletons/"] = "png (RGB, OpenPose-18 drawing)"
+    ctx.summary["people"] = {pid: person_summary(docs[pid], config.min_mask_px) for pid in pids}
+    ctx.summary["prior_kind"] = plan.prior_kind
+    ctx.summary["identity"] = plan.identity
+    ctx.summary["identity_reason"] = plan.reason
+
 
 if __name__ == "__main__":
-    stage_main("05_textual_inversion", None, __doc__)
+    stage_main(STAGE, run, __doc__)

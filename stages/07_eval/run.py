@@ -1,14 +1,62 @@
-"""Stage 07_eval: held-out metrics, renders, edits, speed.
+"""Stage 07: metrics of stage 06's reconstruction on held-out views (renders, edits and speed: issue #11).
 
-Not implemented yet: running it stops the pipeline with a clear message and writes nothing.
+Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (when scoring the input view),
+         06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz, body.npz}, background.ply, manifest);
+         the scene's eval/ (held-out cameras, ground-truth images and masks).
+Params:  07_eval, body, render, compute (pipeline.yaml).
+Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
+  metrics.json   glimpse-eval-metrics/1: tables "humans" (GTU's protocol: people only on black against the
+                 ground truth masked by the union human mask), "people" (each person inside their own mask),
+                 "composite" (the whole frame); per-view values and each table's protocol
+  metrics.md     the same tables in Markdown, each followed by its protocol
 """
 
+import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.pipeline.runner import stage_main  # noqa: E402
+from glimpse.body.config import resolve_model_path  # noqa: E402
+from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.compute import apply_compute, resolve_device  # noqa: E402
+from glimpse.errors import GlimpseError  # noqa: E402
+from glimpse.eval.score import METRICS_FORMAT, headline, score_views, write_tables  # noqa: E402
+from glimpse.eval.views import choose_views  # noqa: E402
+from glimpse.gaussians.model import GaussianModel  # noqa: E402
+from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
+from glimpse.humans.load import load_trained_people  # noqa: E402
+from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.lpips import LPIPS  # noqa: E402
+from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
+from glimpse.scene import load_scene  # noqa: E402
+
+STAGE = "07_eval"
+
+
+def run(ctx: StageContext) -> None:
+    config, render, body, compute = (ctx.section(name) for name in (STAGE, "render", "body", "compute"))
+    apply_compute(compute)
+    device = resolve_device(compute)
+    scene = load_scene(ctx.scene_root)
+    sfm, masks, joint = (ctx.upstream_dir(name) for name in ("01_sfm", "03_masks", "06_joint_opt"))
+    width, height, cameras = read_cameras_json(sfm / "cameras.json")
+    sfm_report = json.loads((sfm / "report.json").read_text())
+    world_is_scene_frame = sfm_report.get("mode") != "sfm" or scene.cameras is not None
+    view_set = choose_views(config, scene, world_is_scene_frame, cameras, width, height, sfm / "frames",
+                            masks / "masks")
+    if not view_set.views:
+        raise GlimpseError(f"07_eval: no view to score (no eval/ image and no input frame with a camera in {sfm})")
+    people = [p.to(device) for p in load_trained_people(joint / "humans", BodyModel.from_file(resolve_model_path(body)))]
+    background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0]).to(device)
+    prior = json.loads((joint / "manifest.json").read_text()).get("summary", {}).get("prior", "unknown")
+    with ctx.timed("score"):
+        tables = score_views(view_set, people, background, render, LPIPS(config.lpips_net).to(device), device)
+    write_tables(tables, prior, view_set.description, ctx.out)
+    ctx.formats.update({"metrics.json": METRICS_FORMAT, "metrics.md": "markdown"})
+    ctx.summary.update({"views": view_set.source, "view_count": len(view_set.views), "prior": prior,
+                        **headline(tables)})
+
 
 if __name__ == "__main__":
-    stage_main("07_eval", None, __doc__)
+    stage_main(STAGE, run, __doc__)

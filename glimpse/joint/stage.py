@@ -1,0 +1,166 @@
+"""Stage 06's logic: training views from stage 01's frames and stage 03's masks, people initialised
+on their canonical bodies, the background from stage 04, joint training with checkpoints, then the
+renders and the report. The stage's run.py only parses, loads and writes what this returns."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from glimpse.background.stage import render_camera
+from glimpse.body.config import BodyConfig
+from glimpse.body.model import BodyModel
+from glimpse.body.params import BodyParams
+from glimpse.cameras.model import PinholeCamera
+from glimpse.errors import GlimpseError
+from glimpse.gaussians.model import GaussianModel
+from glimpse.humans.person import PersonGaussians, initial_person
+from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
+from glimpse.io.video import write_mp4
+from glimpse.joint.compose import frame_gaussians, render_frame
+from glimpse.joint.config import JointConfig
+from glimpse.joint.train import JointLog, JointTrainer, JointView, people_box
+from glimpse.lpips import LPIPS
+from glimpse.metrics import psnr
+from glimpse.prior.base import UnseenPrior
+from glimpse.render.config import RenderConfig
+
+REPORT_FORMAT = "glimpse-joint-report/1"
+
+
+@dataclass(frozen=True)
+class JointInputs:
+    cameras: dict[int, PinholeCamera]  # stage 01's, per frame id
+    width: int
+    height: int
+    frames_dir: Path  # stage 01's frames/
+    masks_dir: Path  # stage 03's masks/ (union/ and one folder per person)
+    occluders_dir: Path  # stage 03's occluders/
+    bodies: dict[str, BodyParams]  # stage 02's
+    background: GaussianModel  # stage 04's
+    fps: float
+
+
+@dataclass
+class JointResult:
+    background: GaussianModel
+    people: list[PersonGaussians]
+    report: dict
+
+
+def static_occlusion(union: np.ndarray, occluders: list[np.ndarray]) -> np.ndarray:
+    """[H, W] bool: pixels where some person's body is hidden by something that is not a person (static
+    geometry): the union of the occluder masks outside every person's visible mask. A person hidden by
+    another person needs no exclusion: both are in the render, in depth order."""
+    hidden = np.zeros_like(union, dtype=bool)
+    for mask in occluders:
+        hidden |= mask
+    return hidden & ~union
+
+
+def load_views(inputs: JointInputs, config: JointConfig, device: torch.device) -> list[JointView]:
+    """Every frame with a camera; the losses skip pixels a static occluder hides (docs/joint.md)."""
+    frames = frame_files(inputs.frames_dir)
+    views = []
+    for fid in sorted(inputs.cameras):
+        name = frame_name(fid)
+        union_path = inputs.masks_dir / "union" / f"{name}.png"
+        if fid not in frames or not union_path.is_file():
+            raise GlimpseError(f"06_joint_opt: frame {name} has a camera but no "
+                               f"{'frame in ' + str(inputs.frames_dir) if fid not in frames else union_path}; "
+                               f"rerun stages 01 and 03")
+        union = read_mask(union_path)
+        occluders = [read_mask(path) for pid in inputs.bodies
+                     if (path := inputs.occluders_dir / pid / f"{name}.png").is_file()]
+        keep = ~static_occlusion(union, occluders)
+        box = people_box(union, config.loss.lpips_margin_px, config.loss.lpips_min_px)
+        views.append(JointView(fid, render_camera(inputs.cameras[fid], inputs.width, inputs.height, device),
+                               torch.as_tensor(read_rgb(frames[fid]), device=device),
+                               torch.as_tensor(keep, device=device), box))
+    if not views:
+        raise GlimpseError("06_joint_opt: no frame has a camera (stage 01's cameras.json is empty)")
+    return views
+
+
+def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, body_model: BodyModel,
+                   sh_degree: int, device: torch.device) -> list[PersonGaussians]:
+    """One PersonGaussians per person with a body in some frame with a camera, in pid order."""
+    people = []
+    for pid in sorted(inputs.bodies):
+        params = inputs.bodies[pid].select(sorted(inputs.cameras))
+        if len(params.frame_ids) == 0:
+            continue
+        person = initial_person(pid, body_model, params, body.canonical_hip_angle_deg, body.skinning,
+                                config.initial_grey, config.initial_opacity, config.initial_scale_knn, sh_degree)
+        people.append(person.to(device))
+    return people
+
+
+def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, body: BodyConfig,
+                body_model: BodyModel, prior: UnseenPrior, seed: int, device: torch.device, work: Path,
+                key: str, out: Path) -> JointResult:
+    """Train, then render every input view (``out/renders/joint.mp4``) and build the report."""
+    torch.manual_seed(seed)
+    views = load_views(inputs, config, device)
+    people = initial_people(inputs, config, body, body_model, render.sh_degree, device)
+    initial_counts = {p.pid: len(p.model) for p in people}
+    background = inputs.background.to(device)
+    lpips_module = LPIPS(config.loss.lpips_net).to(device) if config.loss.lpips > 0 else None
+    trainer = JointTrainer(background, people, views, config, render, prior, lpips_module, seed,
+                           work / "checkpoint.pt", key)
+    training = trainer.run()
+    frames_doc = _write_views(trainer, views, config, inputs, out)
+    report = _report(training, config, people, initial_counts, frames_doc, prior.name)
+    return JointResult(background, people, report)
+
+
+@torch.no_grad()
+def _write_views(trainer: JointTrainer, views: list[JointView], config: JointConfig, inputs: JointInputs,
+                 out: Path) -> dict:
+    """Render each input view once; PSNR on the people's pixels (stage 03's union mask) per frame."""
+    frames_doc: dict[str, dict] = {}
+    degree = trainer.render.sh_degree
+
+    def renders():
+        for view in views:
+            gaussians = frame_gaussians(view.camera, view.frame_id, trainer.people, degree, trainer.background,
+                                        trainer.background_degree)
+            rendered = render_frame(view.camera, gaussians, len(trainer.people), trainer.render).rgb.clamp(0, 1)
+            union = torch.as_tensor(read_mask(inputs.masks_dir / "union" / f"{frame_name(view.frame_id)}.png"),
+                                    device=rendered.device)
+            target = view.target()
+            entry = {"psnr_db": round(float(psnr(rendered, target)), 3)}
+            if union.any():
+                entry["psnr_people_db"] = round(float(psnr(rendered, target, union)), 3)
+            frames_doc[frame_name(view.frame_id)] = entry
+            picture = (rendered.cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+            yield np.concatenate([view.image.cpu().numpy(), picture], axis=1)
+
+    if config.render_video:
+        write_mp4(out / "renders" / "joint.mp4", renders(), inputs.fps)
+    else:
+        for _ in renders():
+            pass
+    return frames_doc
+
+
+def _mean_of(frames_doc: dict, key: str) -> float | None:
+    values = [f[key] for f in frames_doc.values() if key in f and np.isfinite(f[key])]
+    return round(float(np.mean(values)), 3) if values else None
+
+
+def _report(training: JointLog, config: JointConfig, people: list[PersonGaussians], initial_counts: dict,
+            frames_doc: dict, prior: str) -> dict:
+    return {"format": REPORT_FORMAT, "prior": prior, "iterations": config.total_iterations,
+            "resumed_from_iteration": training.resumed_from, "iterations_per_s": round(training.iterations_per_s, 3),
+            "training_s": round(training.seconds, 2),
+            "people": {p.pid: {"gaussians_initial": initial_counts[p.pid], "gaussians": len(p.model),
+                               "frames": len(p.body.frame_ids),
+                               "pose_offset_mean_deg": round(math.degrees(p.pose_offsets.detach().abs().mean().item()),
+                                                             4)} for p in people},
+            "psnr_db": _mean_of(frames_doc, "psnr_db"), "psnr_people_db": _mean_of(frames_doc, "psnr_people_db"),
+            "frames": frames_doc, "densify_events": training.densify_events, "loss_history": training.losses}

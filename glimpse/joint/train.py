@@ -1,0 +1,282 @@
+"""The joint optimisation loop (paper Sec. 4.5): every person's canonical Gaussians and the
+background, trained together on the input frames.
+
+Each iteration renders one input frame (frames in a fresh seeded order every epoch) with every
+person present posed by that frame's (refined) pose, in one rasterizer call, and minimises
+
+    mse * MSE + dssim * D-SSIM + lpips * LPIPS              (over pixels no static occluder hides)
+  + hard_surface * sum_k mean(hard_surface(alpha_k))         (each person's alpha, same pixels)
+  + the prior's terms
+
+Schedule (all scaled by schedule_scale): human means fixed and opacities >= early_min_opacity
+until fix_centres_until; human densification at densify_at; pruning of transparent, large or
+escaped human Gaussians every prune_every after that; the humans' SH degree grows every
+sh_degree_every. The background keeps its count. Everything random is a function of
+(seed, iteration), and checkpoints hold every changing state, so a resumed run ends as an
+uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+from tqdm import tqdm
+
+from glimpse.background.train import scene_extent, training_background, view_order
+from glimpse.gaussians.density import DensifyConfig, DensityStats, densify_and_prune, keep_only
+from glimpse.gaussians.model import GaussianModel, logit
+from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.humans.person import PersonGaussians
+from glimpse.joint.compose import frame_gaussians, render_frame
+from glimpse.joint.config import JointConfig
+from glimpse.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_loss
+from glimpse.lpips import LPIPS
+from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.prior.base import UnseenPrior
+from glimpse.render import Camera
+from glimpse.render.config import RenderConfig
+
+log = logging.getLogger("glimpse")
+LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
+HUMAN_EXTENT = 1.0  # canonical frame: human learning rates are in metres of body
+NEVER = 2**62  # an iteration no run reaches
+
+
+@dataclass
+class JointView:
+    """One input frame: camera, image [H, W, 3] uint8, the pixels the losses use ``keep [H, W]`` bool,
+    and the LPIPS box ``(y0, y1, x0, x1)`` around its people (None: nobody visible)."""
+
+    frame_id: int
+    camera: Camera
+    image: Tensor
+    keep: Tensor
+    people_box: tuple[int, int, int, int] | None
+
+    def target(self) -> Tensor:
+        return self.image.float() / 255.0
+
+
+@dataclass
+class JointLog:
+    losses: list[dict] = field(default_factory=list)
+    densify_events: list[dict] = field(default_factory=list)
+    resumed_from: int = 0
+    iterations_run: int = 0
+    seconds: float = 0.0
+
+    @property
+    def iterations_per_s(self) -> float:
+        return self.iterations_run / self.seconds if self.seconds > 0 else 0.0
+
+
+def reconstruction_terms(config: JointConfig, lpips_module: LPIPS | None, rendered: Tensor, target: Tensor,
+                         keep: Tensor, box: tuple[int, int, int, int] | None) -> dict[str, Tensor]:
+    """Unweighted MSE, D-SSIM and (inside ``box``) LPIPS of ``rendered`` vs ``target`` [H, W, 3] over ``keep``."""
+    terms = {"mse": mse_loss(rendered, target, keep), "dssim": dssim_loss_on(rendered, target, keep)}
+    if config.loss.lpips > 0 and lpips_module is not None and box is not None:
+        y0, y1, x0, x1 = box
+        terms["lpips"] = lpips_loss(lpips_module, rendered[y0:y1, x0:x1], target[y0:y1, x0:x1], keep[y0:y1, x0:x1])
+    return terms
+
+
+def human_densify_config(config: JointConfig) -> DensifyConfig:
+    """The humans' thresholds as a DensifyConfig (their schedule is JointConfig's; sizes in metres of body)."""
+    d = config.density
+    return DensifyConfig(start=0, stop=NEVER, every=1, grad_threshold=d.grad_threshold,
+                         reference_height_px=d.reference_height_px, percent_dense=d.split_scale_m / HUMAN_EXTENT,
+                         min_opacity=d.prune_min_opacity, max_screen_px=float("inf"),
+                         max_world_fraction=float("inf"), opacity_reset_every=NEVER, opacity_reset_value=1.0,
+                         max_gaussians=d.max_gaussians)
+
+
+def prune_person(person: PersonGaussians, optimizer: torch.optim.Optimizer, stats: DensityStats,
+                 config: JointConfig) -> int:
+    """Drop the person's transparent Gaussians, those larger than prune_max_scale_m, and those that left the
+    skinning grid. Returns how many were dropped."""
+    model = person.model
+    with torch.no_grad():
+        drop = model.opacities() < config.density.prune_min_opacity
+        drop |= model.scales().max(dim=1).values > config.density.prune_max_scale_m
+        drop |= ~person.grid.inside(model.means)
+        if drop.any():
+            keep_only(model, optimizer, ~drop)
+            stats.keep(~drop)
+    return int(drop.sum())
+
+
+class JointTrainer:
+    """Trains ``people`` and ``background`` on ``views``; ``checkpoint`` (a path) is read at start and
+    written every ``config.checkpoint_every`` iterations; ``key`` fingerprints inputs and parameters."""
+
+    def __init__(self, background: GaussianModel, people: list[PersonGaussians], views: list[JointView],
+                 config: JointConfig, render: RenderConfig, prior: UnseenPrior, lpips_module: LPIPS | None,
+                 seed: int, checkpoint: Path, key: str):
+        self.background, self.people, self.views, self.config, self.render = background, people, views, config, render
+        self.prior, self.lpips, self.seed, self.checkpoint, self.key = prior, lpips_module, seed, checkpoint, key
+        self.background_degree = min(background.sh_degree, render.sh_degree)
+        self.extent = scene_extent([v.camera for v in views], background.means.detach())
+        self.background_rates = config.scaled_rates(config.background_lr)
+        self.human_rates = config.scaled_rates(config.lr)
+        self.densify = human_densify_config(config)
+        self._make_optimizers()
+        self.stats = [DensityStats(len(p.model), p.model.means.device) for p in people]
+        self.log = JointLog()
+        self.step = 0
+
+    def _make_optimizers(self) -> None:
+        self.background_optimizer = make_optimizer(self.background, self.background_rates, self.extent)
+        self.person_optimizers = [make_optimizer(p.model, self.human_rates, HUMAN_EXTENT) for p in self.people]
+        self.pose_optimizer = (torch.optim.Adam([p.pose_offsets for p in self.people], lr=self.config.pose_lr)
+                               if self.config.refine_pose and self.people else None)
+
+    def _optimizers(self) -> list[torch.optim.Optimizer]:
+        extra = [self.pose_optimizer] if self.pose_optimizer is not None else []
+        return [self.background_optimizer, *self.person_optimizers, *extra]
+
+    # --- checkpoints -------------------------------------------------------------------------
+
+    def _state(self) -> dict:
+        def params(model: GaussianModel) -> dict:
+            return {k: v.detach().cpu() for k, v in model.parameter_dict().items()}
+
+        return {"step": self.step, "background": params(self.background),
+                "people": [{"parameters": params(p.model), "pose_offsets": p.pose_offsets.detach().cpu()}
+                           for p in self.people],
+                "optimizers": [o.state_dict() for o in self._optimizers()],
+                "stats": [{k: v.cpu() for k, v in s.state_dict().items()} for s in self.stats],
+                "losses": self.log.losses, "densify_events": self.log.densify_events}
+
+    def _restore(self, state: dict) -> None:
+        device = self.background.means.device
+        self.background.replace_parameters({k: v.to(device) for k, v in state["background"].items()})
+        for person, saved in zip(self.people, state["people"]):
+            person.model.replace_parameters({k: v.to(device) for k, v in saved["parameters"].items()})
+            with torch.no_grad():
+                person.pose_offsets.copy_(saved["pose_offsets"])
+        self._make_optimizers()
+        for optimizer, saved in zip(self._optimizers(), state["optimizers"]):
+            optimizer.load_state_dict(saved)
+        for stats, saved in zip(self.stats, state["stats"]):
+            stats.load_state_dict({k: v.to(device) for k, v in saved.items()})
+        self.log.losses, self.log.densify_events = list(state["losses"]), list(state["densify_events"])
+        self.step = self.log.resumed_from = int(state["step"])
+
+    # --- one iteration -----------------------------------------------------------------------
+
+    def _iteration(self) -> dict[str, float]:
+        step, config = self.step + 1, self.config
+        set_position_lr(self.background_optimizer, self.background_rates, self.extent, step)
+        for optimizer in self.person_optimizers:
+            set_position_lr(optimizer, self.human_rates, HUMAN_EXTENT, step)
+        epoch, slot = divmod(step - 1, len(self.views))
+        view = self.views[int(view_order(self.seed, epoch, len(self.views))[slot])]
+        human_degree = config.human_sh_degree(step, self.render.sh_degree)
+        gaussians = frame_gaussians(view.camera, view.frame_id, self.people, human_degree, self.background,
+                                    self.background_degree)
+        colour = training_background(config, self.seed, step, view.image.device)
+        out = render_frame(view.camera, gaussians, len(self.people), self.render, colour)
+        out.means2d.retain_grad()
+        terms = reconstruction_terms(config, self.lpips, out.rgb, view.target(), view.keep, view.people_box)
+        weights = config.loss
+        reconstruction = sum(getattr(weights, name) * value for name, value in terms.items())
+        present = list(gaussians.rows)
+        if present and weights.hard_surface > 0:
+            terms["hard_surface"] = sum(hard_surface_loss(out.group_alpha[1 + k], view.keep) for k in present)
+        total = reconstruction + weights.hard_surface * terms.get("hard_surface", 0.0)
+        prior_terms = self.prior.losses(step, [self.people[k] for k in present])
+        terms.update(prior_terms)
+        total = total + sum(prior_terms.values())
+        total.backward()
+        with torch.no_grad():
+            for k, rows in gaussians.rows.items():
+                if out.means2d.grad is not None:
+                    self.stats[k].update(out.means2d.grad[rows], out.radii[rows], view.camera.width,
+                                         view.camera.height)
+            fixed = config.centres_fixed_at(step)
+            if fixed:
+                for person in self.people:
+                    person.model.means.grad = None
+            for optimizer in self._optimizers():
+                optimizer.step()
+                optimizer.zero_grad(set_to_none=True)
+            if fixed:
+                floor = logit(config.early_min_opacity) if config.early_min_opacity > 0 else None
+                for person in self.people:
+                    if floor is not None:
+                        person.model.opacity_logits.clamp_(min=floor)
+            self._density_control(step, view.camera.height)
+        self.step = step
+        values = {name: float(value.detach()) for name, value in terms.items()}
+        values["total"] = float(total.detach())
+        return values
+
+    def _density_control(self, step: int, height: int) -> None:
+        config = self.config
+        densify, prune = step in config.densify_steps, config.prunes_at(step)
+        if not (densify or prune):
+            return
+        for k, (person, optimizer) in enumerate(zip(self.people, self.person_optimizers)):
+            event: dict = {"iteration": step, "person": person.pid}
+            if densify:
+                generator = torch.Generator(device=person.model.means.device).manual_seed(
+                    self.seed * 1_000_003 + step * 101 + k)
+                event.update(densify_and_prune(person.model, optimizer, self.stats[k], self.densify, HUMAN_EXTENT,
+                                               height, False, generator))
+                self.stats[k] = DensityStats(len(person.model), person.model.means.device)
+            if prune:
+                event["pruned_large_or_transparent"] = prune_person(person, optimizer, self.stats[k], config)
+            event["count"] = len(person.model)
+            self.log.densify_events.append(event)
+
+    # --- the run -------------------------------------------------------------------------------
+
+    def run(self) -> JointLog:
+        total = self.config.total_iterations
+        state = load_checkpoint(self.checkpoint, self.key)
+        if state is not None:
+            self._restore(state)
+            log.info("resuming joint optimisation from iteration %d (%s)", self.step, self.checkpoint)
+        started = time.perf_counter()
+        bar = tqdm(total=total, initial=self.step, desc="06 joint", unit="it", disable=None, leave=False)
+        while self.step < total:
+            values = self._iteration()
+            if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
+                self.log.losses.append({"iteration": self.step, **{k: round(v, 6) for k, v in values.items()}})
+            bar.update(1)
+            counts = "/".join(str(len(p.model)) for p in self.people)
+            bar.set_postfix(loss=f"{values['total']:.4f}", mse=f"{values['mse']:.4f}", humans=counts, refresh=False)
+            if self.step % self.config.checkpoint_every == 0 and self.step < total:
+                save_checkpoint(self.checkpoint, self.key, self._state())
+                log.info("iteration %d/%d: loss %.4f, human Gaussians %s (checkpoint saved)", self.step, total,
+                         values["total"], counts)
+            self.log.iterations_run += 1
+        bar.close()
+        self.log.seconds = time.perf_counter() - started
+        return self.log
+
+
+def people_box(union: np.ndarray, margin_px: int, min_px: int) -> tuple[int, int, int, int] | None:
+    """(y0, y1, x0, x1): the box around the True pixels of ``union [H, W]``, grown by ``margin_px`` and to at
+    least ``min_px`` a side (within the image); None when nothing is set."""
+    ys, xs = np.nonzero(union)
+    if len(ys) == 0:
+        return None
+    height, width = union.shape
+
+    def span(lo: int, hi: int, size: int) -> tuple[int, int]:
+        lo, hi = max(lo - margin_px, 0), min(hi + 1 + margin_px, size)
+        grow = max(min(min_px, size) - (hi - lo), 0)
+        lo = max(lo - (grow + 1) // 2, 0)
+        hi = min(lo + max(hi - lo, min(min_px, size)), size)
+        return max(min(lo, hi - min(min_px, size)), 0), hi
+
+    y0, y1 = span(int(ys.min()), int(ys.max()), height)
+    x0, x1 = span(int(xs.min()), int(xs.max()), width)
+    return y0, y1, x0, x1

@@ -1,0 +1,185 @@
+"""Stage 06 (joint optimisation) and stage 07 (metrics): posing against the body model, the polar
+rotation against SVD, the schedule, the occluder exclusion, resume, and the stages on the tiny demo
+(quality against the untrained bodies, rendered against the mesh renderer's ground truth)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.body.config import BodyConfig, resolve_model_path
+from glimpse.body.lbs import batch_rodrigues
+from glimpse.body.model import BodyModel
+from glimpse.body.params import BodyParams, read_body_params
+from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.errors import ConfigError
+from glimpse.eval.score import score_views
+from glimpse.eval.views import ViewSet, heldout_views
+from glimpse.fixtures.scenes import make_scene
+from glimpse.gaussians.model import GaussianModel
+from glimpse.gaussians.ply import read_gaussians_ply
+from glimpse.humans.load import load_trained_people
+from glimpse.humans.person import initial_person, joint_transforms, polar_rotation
+from glimpse.joint.config import JointConfig
+from glimpse.joint.stage import static_occlusion
+from glimpse.joint.train import people_box, reconstruction_terms
+from glimpse.lpips import LPIPS
+from glimpse.prior import make_prior, resolve_prior_kind
+from glimpse.render.config import RenderConfig
+from glimpse.scene import load_scene
+from tests.stage_helpers import read_json, run
+
+PIPELINE = load_pipeline_yaml()
+BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
+JOINT = config_from_mapping(JointConfig, PIPELINE["06_joint_opt"], "06_joint_opt")
+RENDER = RenderConfig(backend="auto", sh_degree=2, antialiased=False)
+
+
+@pytest.fixture(scope="module")
+def body_model() -> BodyModel:
+    return BodyModel.from_file(resolve_model_path(BODY))
+
+
+def _body(frames: int, seed: int = 0) -> BodyParams:
+    rng = np.random.default_rng(seed)
+    return BodyParams(np.arange(frames), rng.normal(0, 0.5, 10), rng.normal(0, 0.4, (frames, 3)),
+                      rng.normal(0, 0.2, (frames, 69)), rng.normal(0, 1.0, (frames, 3)), 1.3, "free",
+                      np.zeros(frames, bool))
+
+
+def test_joint_transforms_are_the_body_models(body_model):
+    body = _body(2)
+    person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0)
+    for row in range(2):
+        expected = body_model(body.betas, body.global_orient[row:row + 1], body.body_pose[row:row + 1],
+                              body.transl[row:row + 1], body.scale).transforms[0]
+        pose = torch.as_tensor(np.concatenate([body.global_orient[row], body.body_pose[row]]), dtype=torch.float32)
+        found = joint_transforms(person.rig, pose, torch.as_tensor(body.transl[row], dtype=torch.float32), body.scale)
+        torch.testing.assert_close(found, expected.float(), rtol=1e-4, atol=1e-4)
+
+
+def test_gaussians_on_the_canonical_body_follow_the_posed_body(body_model):
+    """Gaussians initialised on the Da-pose vertices land on the body model's posed vertices (up to the
+    pose blend shapes, which Gaussians do not get, and the grid's interpolation)."""
+    body = _body(1, seed=1)
+    person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0)
+    posed = person.posed(0, torch.tensor([0.0, 0.0, -5.0]), 0)
+    expected = body_model(body.betas, body.global_orient, body.body_pose, body.transl, body.scale).vertices[0].float()
+    error = (posed.means.detach() - expected).norm(dim=1) / body.scale
+    assert float(error.mean()) < 0.01 and float(error.quantile(0.99)) < 0.04  # metres of body
+    assert torch.allclose(posed.opacities, torch.full_like(posed.opacities, 0.9))
+    assert torch.allclose(posed.colors, torch.full_like(posed.colors, 0.5), atol=1e-6)
+
+
+def test_polar_rotation_matches_svd_on_blends_of_bone_rotations():
+    g = torch.Generator().manual_seed(0)
+    first = batch_rodrigues(torch.randn(500, 3, generator=g))
+    second = first @ batch_rodrigues(0.6 * torch.randn(500, 3, generator=g))
+    weights = torch.rand(500, 1, 1, generator=g)
+    blended = (weights * first + (1 - weights) * second) * 1.7
+    u, _, vh = torch.linalg.svd(blended)
+    torch.testing.assert_close(polar_rotation(blended), u @ vh, rtol=0, atol=1e-5)
+
+
+def test_schedule_is_the_papers_scaled():
+    config = replace(JOINT, schedule_scale=0.1)
+    assert config.total_iterations == 1200
+    assert config.densify_steps == {200, 250, 300}
+    assert config.centres_fixed_at(150) and not config.centres_fixed_at(151)
+    assert [s for s in range(1, 400) if config.prunes_at(s)] == [200, 250, 300, 350]
+    assert [config.human_sh_degree(s, 2) for s in (1, 200, 201, 401, 1000)] == [0, 0, 1, 2, 2]
+    assert replace(JOINT, schedule_scale=1.0).densify_steps == {2000, 2500, 3000}
+
+
+def test_occluded_pixels_give_no_gradient_and_people_are_not_excluded():
+    union = np.zeros((8, 8), bool)
+    union[2:5, 2:5] = True  # a person in front of another
+    occluder_a = np.zeros((8, 8), bool)
+    occluder_a[3:7, 3:7] = True  # hidden partly by that person, partly by a table
+    hidden = static_occlusion(union, [occluder_a])
+    assert hidden[6, 6] and not hidden[3, 3]
+    rendered = torch.rand(40, 40, 3, requires_grad=True)
+    target = torch.rand(40, 40, 3)
+    keep = torch.ones(40, 40, dtype=torch.bool)
+    keep[10:20, 10:20] = False
+    config = replace(JOINT, loss=replace(JOINT.loss, lpips=0.0))
+    terms = reconstruction_terms(config, None, rendered, target, keep, None)
+    sum(terms.values()).backward()
+    assert rendered.grad[10:20, 10:20].abs().max() == 0 and rendered.grad[keep].abs().max() > 0
+
+
+def test_people_box_grows_to_the_minimum_size_inside_the_image():
+    union = np.zeros((50, 60), bool)
+    union[0:3, 58:60] = True
+    y0, y1, x0, x1 = people_box(union, 2, 32)
+    assert (y1 - y0, x1 - x0) == (32, 32) and y0 == 0 and x1 == 60
+    assert people_box(np.zeros((5, 5), bool), 2, 32) is None
+
+
+def test_priors_are_chosen_by_name_and_unknown_ones_are_listed():
+    assert resolve_prior_kind("auto") == "none" and make_prior("none").losses(1, []) == {}
+    with pytest.raises(ConfigError, match="issue #10"):
+        make_prior("surface")
+    with pytest.raises(ConfigError, match="registered priors: none"):
+        make_prior("magic")
+
+
+# --- the stages on the tiny demo ------------------------------------------------------------------------
+
+SHORT = "04_bg_pretrain.schedule_scale=0.02 06_joint_opt.schedule_scale=0.02"  # 600 and 240 iterations
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("joint")
+    scene = make_scene("demo", root / "scene", "tiny", seed=0)
+    for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt",
+                  "07_eval"):
+        run(stage, scene, root / "out", SHORT)
+    return scene, root / "out" / "demo_tiny"
+
+
+def test_stage06_writes_canonical_people_and_keeps_the_backgrounds_count(tiny):
+    scene, run_dir = tiny
+    out = run_dir / "06_joint_opt"
+    report = read_json(out / "report.json")
+    assert report["prior"] == "none" and report["iterations"] == 240
+    before, _ = read_gaussians_ply(run_dir / "04_bg_pretrain" / "background.ply")
+    after, metadata = read_gaussians_ply(out / "background.ply")
+    assert len(after.means) == len(before.means) and metadata["stage"] == "06_joint_opt"
+    for pid in ("p0", "p1"):
+        splats, meta = read_gaussians_ply(out / "humans" / pid / "canonical.ply")
+        assert meta["frame"] == "canonical" and len(splats.means) == report["people"][pid]["gaussians"]
+        body = read_body_params(out / "humans" / pid / "body.npz")
+        fitted = read_body_params(run_dir / "02_smpl_fit" / "humans" / pid / "body.npz")
+        assert np.abs(body.body_pose - fitted.select(body.frame_ids).body_pose).max() > 0  # poses refined
+        assert np.abs(body.body_pose - fitted.select(body.frame_ids).body_pose).max() < 0.2
+    losses = report["loss_history"]
+    assert np.mean([e["total"] for e in losses[-3:]]) < losses[0]["total"]
+    assert (out / "renders" / "joint.mp4").stat().st_size > 0
+
+
+def test_training_beats_the_untrained_bodies_on_held_out_views(tiny, body_model):
+    """Humans-only PSNR on the held-out cameras (mesh-rendered ground truth) against the same bodies grey."""
+    scene, run_dir = tiny
+    trained = read_json(run_dir / "07_eval" / "metrics.json")["tables"]["humans"]["rows"][0]
+    people = load_trained_people(run_dir / "06_joint_opt" / "humans", body_model)
+    grey = [initial_person(p.pid, body_model, p.body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0) for p in people]
+    views = heldout_views(load_scene(scene), True)
+    background = GaussianModel.from_splats(read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")[0])
+    baseline = score_views(ViewSet("held-out", "test", views), grey, background, RENDER, LPIPS("alex"),
+                           torch.device("cpu")).rows["humans"][0]
+    assert trained["psnr"] > baseline.psnr + 1.0
+
+
+def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):
+    scene, run_dir = tiny
+    metrics = read_json(run_dir / "07_eval" / "metrics.json")
+    assert metrics["views"].startswith("held-out") and set(metrics["tables"]) == {"humans", "people", "composite"}
+    text = (run_dir / "07_eval" / "metrics.md").read_text()
+    assert "Humans only" in text and "union of the people's masks" in text
+    out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input")
+    assert "INPUT view" in read_json(out / "metrics.json")["views"]
