@@ -39,7 +39,7 @@ from glimpse.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_los
 from glimpse.lpips import LPIPS
 from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
 from glimpse.prior.base import UnseenPrior
-from glimpse.render import Camera
+from glimpse.render import Camera, RenderOutput
 from glimpse.render.config import RenderConfig
 
 log = logging.getLogger("glimpse")
@@ -183,16 +183,8 @@ class JointTrainer:
         colour = training_background(config, self.seed, step, view.image.device)
         out = render_frame(view.camera, gaussians, len(self.people), self.render, colour)
         out.means2d.retain_grad()
-        terms = reconstruction_terms(config, self.lpips, out.rgb, view.target(), view.keep, view.people_box)
-        weights = config.loss
-        reconstruction = sum(getattr(weights, name) * value for name, value in terms.items())
         present = list(gaussians.rows)
-        if present and weights.hard_surface > 0:
-            terms["hard_surface"] = sum(hard_surface_loss(out.group_alpha[1 + k], view.keep) for k in present)
-        total = reconstruction + weights.hard_surface * terms.get("hard_surface", 0.0)
-        prior_terms = self.prior.losses(step, [self.people[k] for k in present])
-        terms.update(prior_terms)
-        total = total + sum(prior_terms.values())
+        total, terms = self._loss(step, view, out, present)
         total.backward()
         with torch.no_grad():
             for k, rows in gaussians.rows.items():
@@ -206,16 +198,26 @@ class JointTrainer:
             for optimizer in self._optimizers():
                 optimizer.step()
                 optimizer.zero_grad(set_to_none=True)
-            if fixed:
-                floor = logit(config.early_min_opacity) if config.early_min_opacity > 0 else None
+            if fixed and config.early_min_opacity > 0:
                 for person in self.people:
-                    if floor is not None:
-                        person.model.opacity_logits.clamp_(min=floor)
+                    person.model.opacity_logits.clamp_(min=logit(config.early_min_opacity))
             self._density_control(step, view.camera.height)
         self.step = step
         values = {name: float(value.detach()) for name, value in terms.items()}
         values["total"] = float(total.detach())
         return values
+
+    def _loss(self, step: int, view: JointView, out: RenderOutput, present: list[int]) -> tuple[Tensor, dict]:
+        """The total loss and its unweighted terms (the prior's come weighted) for one render."""
+        weights = self.config.loss
+        terms = reconstruction_terms(self.config, self.lpips, out.rgb, view.target(), view.keep, view.people_box)
+        total = sum(getattr(weights, name) * value for name, value in terms.items())
+        if present and weights.hard_surface > 0:
+            terms["hard_surface"] = sum(hard_surface_loss(out.group_alpha[1 + k], view.keep) for k in present)
+            total = total + weights.hard_surface * terms["hard_surface"]
+        prior_terms = self.prior.losses(step, [self.people[k] for k in present])
+        terms.update(prior_terms)
+        return total + sum(prior_terms.values()), terms
 
     def _density_control(self, step: int, height: int) -> None:
         config = self.config
