@@ -9,7 +9,7 @@ LPIPS (GTU's protocol), per person inside their own masks, and the full composit
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, as a ratio to one forward+backward render of the same Gaussians
-(background and people posed) by the rasterizer alone, measured in the same run.
+(background and people posed), posing and rasterizer only, measured in the same run.
 
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--fit keypoints2d] [--seed 1]
                                     [--bg-schedule 0.02] [--no-speed]
@@ -86,14 +86,14 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
     return out / f"{scenario}_{size}"
 
 
-def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int) -> None:
+def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str) -> None:
     print(f"bodies fitted with 02_smpl_fit.mode={fit}; seed {seed}; stage 04 schedule_scale "
-          f"{bg_schedule or 'default'}\n")
+          f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
     print("| scenario | views | humans PSNR | SSIM | LPIPS x100 | per person PSNR (own mask) | composite PSNR | "
           "input-view PSNR, people px | Gaussians per person | iterations | it/s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for scenario in scenarios:
-        run_dir = run_scene(scenario, "full", root, fit, bg_schedule, "", seed)
+        run_dir = run_scene(scenario, "full", root, fit, bg_schedule, params, seed)
         metrics = read_json(run_dir / "07_eval" / "metrics.json")
         report = read_json(run_dir / "06_joint_opt" / "report.json")
         humans = metrics["tables"]["humans"]["rows"][0]
@@ -108,7 +108,7 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
 
 def speed(root: Path) -> None:
     print(f"| size | iterations | Gaussians in a render (background + people) | iterations/s | ms/iteration | "
-          f"render fwd+bwd ms | iteration / render |")
+          f"posing + render fwd+bwd ms | iteration / (posing + render) |")
     print("|---|---|---|---|---|---|---|")
     for size in SPEED_SIZES:
         run_dir = run_scene("demo", size, root, "keypoints3d", SPEED_BG_SCHEDULE,
@@ -128,6 +128,7 @@ def main() -> int:
                         help="how stage 02 gets the bodies (provided = the ground truth)")
     parser.add_argument("--seed", type=int, default=SEED, help="the fixture scenes' seed")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed runs")
+    parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
                         help="stage 04's schedule_scale in the quality runs (default: pipeline.yaml's)")
     args = parser.parse_args()
@@ -135,7 +136,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         if args.quality:
             print("### stage 06, prior none: held-out quality at full size, bodies fitted to keypoints\n")
-            quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed)
+            quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params)
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
             speed(Path(tmp) / "speed")

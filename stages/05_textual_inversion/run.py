@@ -14,6 +14,8 @@ manifest's summary says so. Method: docs/crops.md, glimpse/crops/.
 import sys
 from pathlib import Path
 
+import torch
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from glimpse.body.config import resolve_model_path  # noqa: E402
@@ -36,8 +38,6 @@ def run(ctx: StageContext) -> None:
     scene = load_scene(ctx.scene_root)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")
-    import torch
-
     model = BodyModel.from_file(resolve_model_path(ctx.section("body")), dtype=torch.float64)
     pids = sorted(scene.humans)
     bodies = {pid: read_body_params(fits / "humans" / pid / "body.npz") for pid in pids}
