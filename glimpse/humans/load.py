@@ -18,7 +18,9 @@ from glimpse.humans.person import PersonGaussians, build_rig
 def load_trained_people(humans_dir: Path, body_model: BodyModel) -> list[PersonGaussians]:
     """Every person under ``humans_dir`` (stage 06's ``humans/``), in pid order, posed by the refined poses
     of body.npz (pose offsets start at zero). The Da-pose angle is the one stage 06 trained with."""
-    people = []
+    people: list[PersonGaussians] = []
+    if not humans_dir.is_dir():  # stage 06 trained nobody (no person had a body in a frame with a camera)
+        return people
     for folder in sorted(p for p in humans_dir.iterdir() if p.is_dir()):
         splats, metadata = read_gaussians_ply(folder / "canonical.ply")
         if "canonical_hip_angle_deg" not in metadata:
