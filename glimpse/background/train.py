@@ -69,7 +69,7 @@ def scene_extent(cameras: list[Camera], points: Tensor) -> float:
     """3DGS's ``cameras_extent`` (1.1 x the largest distance of a camera centre from their mean), or,
     when the cameras barely move (a static camera), the median distance of the initial points from the
     cameras' mean centre, whichever is larger."""
-    centres = torch.stack([-(c.R.T @ c.t) for c in cameras])
+    centres = torch.stack([c.centre for c in cameras])
     mean = centres.mean(0)
     spread = 1.1 * float((centres - mean).norm(dim=1).max())
     return max(spread, float((points - mean.to(points)).norm(dim=1).median()))

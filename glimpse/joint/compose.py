@@ -11,18 +11,13 @@ import torch
 from torch import Tensor
 
 from glimpse.gaussians.model import GaussianModel
-from glimpse.humans.person import PersonGaussians
+from glimpse.humans.person import PersonGaussians, PosedGaussians
 from glimpse.render import Camera, RenderOutput, rasterize
 from glimpse.render.config import RenderConfig
 from glimpse.render.projection import quat_scale_to_covariance
 from glimpse.render.sh import num_sh_coeffs, sh_to_rgb
 
 BACKGROUND_GROUP = 0
-
-
-def camera_centre(camera: Camera) -> Tensor:
-    """[3] the camera centre in the world frame."""
-    return -camera.R.T @ camera.t
 
 
 @dataclass
@@ -40,30 +35,29 @@ class FrameGaussians:
 def frame_gaussians(camera: Camera, frame_id: int, people: Sequence[PersonGaussians], human_sh_degree: int,
                     background: GaussianModel | None = None, background_sh_degree: int = 0) -> FrameGaussians:
     """The Gaussians of ``frame_id``: the background (when given) and every person present in that frame."""
-    centre = camera_centre(camera)
-    parts: list[tuple[Tensor, Tensor, Tensor, Tensor, int]] = []
+    parts: list[tuple[int, PosedGaussians]] = []  # (group, Gaussians)
     if background is not None:
         degree = min(background_sh_degree, background.sh_degree)
-        colours = sh_to_rgb(degree, background.sh()[:, : num_sh_coeffs(degree)], background.means - centre)
-        parts.append((background.means, quat_scale_to_covariance(background.quats, background.scales()),
-                      background.opacities(), colours, BACKGROUND_GROUP))
+        colours = sh_to_rgb(degree, background.sh()[:, : num_sh_coeffs(degree)], background.means - camera.centre)
+        parts.append((BACKGROUND_GROUP, PosedGaussians(background.means, quat_scale_to_covariance(
+            background.quats, background.scales()), background.opacities(), colours)))
     for k, person in enumerate(people):
         if person.in_frame(frame_id):
-            posed = person.posed(frame_id, centre, human_sh_degree)
-            parts.append((posed.means, posed.covariances, posed.opacities, posed.colors, 1 + k))
+            parts.append((1 + k, person.posed(frame_id, camera.centre, human_sh_degree)))
     rows, start = {}, 0
-    for part in parts:
-        if part[4] != BACKGROUND_GROUP:
-            rows[part[4] - 1] = slice(start, start + len(part[0]))
-        start += len(part[0])
+    for group, part in parts:
+        if group != BACKGROUND_GROUP:
+            rows[group - 1] = slice(start, start + len(part.means))
+        start += len(part.means)
     device = camera.R.device
     if not parts:
         empty = torch.zeros(0, 3, device=device)
         return FrameGaussians(empty, torch.zeros(0, 3, 3, device=device), torch.zeros(0, device=device), empty,
                               torch.zeros(0, dtype=torch.long, device=device), rows)
-    groups = torch.cat([torch.full((len(p[0]),), p[4], dtype=torch.long, device=device) for p in parts])
-    return FrameGaussians(torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts]),
-                          torch.cat([p[2] for p in parts]), torch.cat([p[3] for p in parts]), groups, rows)
+    groups = torch.cat([torch.full((len(part.means),), group, dtype=torch.long, device=device)
+                        for group, part in parts])
+    return FrameGaussians(*(torch.cat([getattr(part, name) for _, part in parts])
+                            for name in ("means", "covariances", "opacities", "colors")), groups, rows)
 
 
 def render_frame(camera: Camera, gaussians: FrameGaussians, num_people: int, render: RenderConfig,

@@ -47,6 +47,11 @@ class Camera:
             raise ValueError(f"Camera: need positive size and 0 < near < far, found {self.width}x{self.height}, "
                              f"near {self.near}, far {self.far}")
 
+    @property
+    def centre(self) -> Tensor:
+        """[3] the camera centre in the world frame: -Rᵀ t."""
+        return -self.R.T @ self.t
+
 
 @dataclass(frozen=True)
 class Projected:

@@ -73,8 +73,7 @@ def _colours(camera: Camera, means: Tensor, colors: Tensor | None, sh: Tensor | 
         return colors
     degree = int(round(sh.shape[1] ** 0.5)) - 1 if sh_degree is None else sh_degree
     if view_dirs is None:  # from the camera centre to each Gaussian, in the world frame
-        centre = -camera.R.to(means).T @ camera.t.to(means)
-        view_dirs = means - centre
+        view_dirs = means - camera.centre.to(means)
     return sh_to_rgb(degree, sh, view_dirs)
 
 
