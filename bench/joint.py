@@ -1,18 +1,23 @@
-"""Stage 06 (joint optimisation, prior none) on the fixtures: held-out quality and speed.
+"""Stage 06 (joint optimisation) on the fixtures, per prior: held-out quality and speed.
 
 Quality (--quality): for each scenario at full size (320x240, 100 frames), stages 01-03 with
 bodies fitted to the scene's keypoints (--fit keypoints3d, the default, or keypoints2d: never the
-ground-truth parameters unless --fit provided) and masks from the bodies and frames, stage 04,
-stage 06 with its default schedule, then stage 07
-on the held-out cameras (ground truth rendered by the mesh renderer): humans-only PSNR / SSIM /
-LPIPS (GTU's protocol), per person inside their own masks, and the full composite.
+ground-truth parameters unless --fit provided) and masks from the bodies and frames, stages 04-05,
+then for each prior of --priors stage 06 with its default schedule and stage 07 on the held-out
+cameras (ground truth rendered by the mesh renderer): humans-only PSNR / SSIM / LPIPS (GTU's
+protocol) and the same restricted to the never-seen pixels, each beside the two baselines (empty
+render, bodies in mean colour); per person inside their own masks; the full composite; and the
+hedgehog count (Gaussians with a largest scale above HEDGEHOG_SCALE_M, or a largest / middle
+scale above HEDGEHOG_RATIO). --pictures DIR saves each person's canonical turntable per prior.
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
-size on a short schedule, as a ratio to one forward+backward render of the same Gaussians
-(background and people posed), posing and rasterizer only, measured in the same run.
+size on a short schedule, per prior, as a ratio to one forward+backward render of the same
+Gaussians (background and people posed), posing and rasterizer only, measured in the same run;
+the prior's share of an iteration is 1 - (ms per iteration with prior none) / (ms with it), same run.
 
-    .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--fit keypoints2d] [--seed 1]
-                                    [--bg-schedule 0.02] [--no-speed]
+    .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
+                                    [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
+                                    [--pictures DIR]
 """
 
 from __future__ import annotations
@@ -22,8 +27,10 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -35,7 +42,10 @@ from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
 from glimpse.humans.load import load_trained_people  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.io.images import write_png  # noqa: E402
 from glimpse.joint.compose import frame_gaussians, render_frame  # noqa: E402
+from glimpse.prior.orbit import orbit_camera  # noqa: E402
+from glimpse.render import rasterize  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
 
@@ -48,15 +58,17 @@ SPEED_BG_SCHEDULE = 0.02  # schedule_scale of stage 04 before the speed runs
 UPSTREAM_PARAMS = "02_smpl_fit.overlay=false 03_masks.mode=body"  # plus 02_smpl_fit.mode from --fit
 RENDER_REPEATS = 5
 RENDER = RenderConfig("auto", 2, False)
+BODY_MODEL = Path(__file__).resolve().parents[1] / "glimpse/body/assets/free_body.npz"
+HEDGEHOG_SCALE_M = 0.03  # metres: a human Gaussian with a larger largest scale is counted as a spike
+HEDGEHOG_RATIO = 10.0  # largest / middle scale above which a human Gaussian is counted as a needle
+TURNTABLE_VIEWS, TURNTABLE_PX, TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG = 8, 160, 2.6, 49.1
 
 
 def render_seconds(run_dir: Path) -> tuple[float, int]:
     """Median seconds of one forward+backward render of stage 06's final Gaussians (background and every
     person present) from the first input view, and how many Gaussians that render has."""
     model = GaussianModel.from_splats(read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")[0])
-    people = load_trained_people(run_dir / "06_joint_opt" / "humans",
-                                 BodyModel.from_file(Path(__file__).resolve().parents[1] /
-                                                     "glimpse/body/assets/free_body.npz"))
+    people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
     width, height, cameras = read_cameras_json(run_dir / "01_sfm" / "cameras.json")
     frame = min(f for f in cameras if any(p.in_frame(f) for p in people))
     camera = render_camera(cameras[frame], width, height, torch.device("cpu"))
@@ -74,50 +86,113 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
 
 
 def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float | None, joint_params: str,
-              seed: int = SEED) -> Path:
-    """Stages 01-07 on a fresh fixture scene; returns its run folder."""
+              seed: int = SEED, priors: tuple[str, ...] = ("none",)) -> Iterator[tuple[str, Path]]:
+    """Stages 01-05 on a fresh fixture scene, then 06-07 once per prior: yields (prior, run folder) after each
+    (the next prior's stage 06 replaces the previous one's outputs)."""
     scene = make_scene(scenario, root / f"{scenario}_{size}_{fit}_{seed}", size, seed=seed)
     out = root / f"out_{fit}_{seed}"
     params = f"{UPSTREAM_PARAMS} 02_smpl_fit.mode={fit}"
     params += f" 04_bg_pretrain.schedule_scale={bg_schedule}" if bg_schedule else ""
-    for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt",
-                  "07_eval"):
+    for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"):
         run(stage, scene, out, f"{params} {joint_params}")
-    return out / f"{scenario}_{size}"
+    for prior in priors:
+        for stage in ("06_joint_opt", "07_eval"):
+            run(stage, scene, out, f"{params} {joint_params} prior.kind={prior}")
+        yield prior, out / f"{scenario}_{size}"
 
 
-def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str) -> None:
+def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
+    """(Gaussians of every person, those with a largest scale above HEDGEHOG_SCALE_M, those with a largest /
+    middle scale above HEDGEHOG_RATIO) in stage 06's canonical people."""
+    total = large = needles = 0
+    for ply in sorted((run_dir / "06_joint_opt" / "humans").glob("*/canonical.ply")):
+        scales = np.sort(np.exp(read_gaussians_ply(ply)[0].log_scales), axis=1)
+        total += len(scales)
+        large += int((scales[:, 2] > HEDGEHOG_SCALE_M).sum())
+        needles += int((scales[:, 2] > HEDGEHOG_RATIO * scales[:, 1]).sum())
+    return total, large, needles
+
+
+def turntables(run_dir: Path, picture: Path) -> None:
+    """Every person's canonical Gaussians from TURNTABLE_VIEWS azimuths (elevation 0), one row per person."""
+    people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
+    rows = []
+    for person in people:
+        points = person.rig.canonical_vertices.numpy()
+        centre = 0.5 * (points.min(0) + points.max(0))
+        strip = []
+        for k in range(TURNTABLE_VIEWS):
+            pinhole = orbit_camera(centre, 360.0 * k / TURNTABLE_VIEWS, 0.0, TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG,
+                                   TURNTABLE_PX)
+            camera = render_camera(pinhole, TURNTABLE_PX, TURNTABLE_PX, torch.device("cpu"))
+            with torch.no_grad():
+                rgb = rasterize(camera, **person.model.render_inputs(RENDER.sh_degree),
+                                background=torch.ones(3)).rgb.clamp(0, 1)
+            strip.append((rgb.numpy() * 255 + 0.5).astype(np.uint8))
+        rows.append(np.concatenate(strip, axis=1))
+    if rows:
+        picture.parent.mkdir(parents=True, exist_ok=True)
+        write_png(picture, np.concatenate(rows, axis=0))
+
+
+def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str,
+            priors: tuple[str, ...], pictures: Path | None) -> None:
     print(f"bodies fitted with 02_smpl_fit.mode={fit}; seed {seed}; stage 04 schedule_scale "
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
-    print("| scenario | views | humans PSNR | SSIM | LPIPS x100 | per person PSNR (own mask) | composite PSNR | "
-          "input-view PSNR, people px | Gaussians per person | iterations | it/s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 | "
+          "per person PSNR (own mask) | composite PSNR | input-view PSNR, people px | Gaussians per person | "
+          f"> {HEDGEHOG_SCALE_M * 100:g} cm / ratio > {HEDGEHOG_RATIO:g} | it/s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    baselines = []
     for scenario in scenarios:
-        run_dir = run_scene(scenario, "full", root, fit, bg_schedule, params, seed)
-        metrics = read_json(run_dir / "07_eval" / "metrics.json")
-        report = read_json(run_dir / "06_joint_opt" / "report.json")
-        humans = metrics["tables"]["humans"]["rows"][0]
-        people = metrics["tables"].get("people", {"rows": []})["rows"]
-        per_person = ", ".join(f"{r['label']} {r['psnr']:.1f}" for r in people)
-        composite = metrics["tables"]["composite"]["rows"][0]
-        counts = ", ".join(str(p["gaussians"]) for p in report["people"].values())
-        print(f"| {scenario} | {metrics['views'].split(' (')[0]} | {humans['psnr']:.2f} | {humans['ssim']:.4f} | "
-              f"{humans['lpips']:.2f} | {per_person} | {composite['psnr']:.2f} | {report['psnr_people_db']} | "
-              f"{counts} | {report['iterations']} | {report['iterations_per_s']:.2f} |", flush=True)
+        for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors):
+            metrics = read_json(run_dir / "07_eval" / "metrics.json")
+            report = read_json(run_dir / "06_joint_opt" / "report.json")
+            tables = metrics["tables"]
+            humans = tables["humans"]["rows"]
+            unseen = tables.get("never_seen", {"rows": []})["rows"]
+            people = tables.get("people", {"rows": []})["rows"]
+            per_person = ", ".join(f"{r['label']} {r['psnr']:.1f}" for r in people)
+            composite = tables["composite"]["rows"][0]
+            counts = ", ".join(str(p["gaussians"]) for p in report["people"].values())
+            total, large, needles = hedgehogs(run_dir)
+            never = (f"{unseen[0]['psnr']:.2f} | {unseen[0]['ssim']:.4f} | {unseen[0]['lpips']:.2f}" if unseen
+                     else "- | - | -")
+            print(f"| {scenario} | {report['prior']} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
+                  f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {never} | {per_person} | "
+                  f"{composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | {large} / {needles} of {total} | "
+                  f"{report['iterations_per_s']:.2f} |", flush=True)
+            if prior == priors[0]:
+                baselines.append((scenario, humans[1:], unseen[1:]))
+            if pictures is not None:
+                turntables(run_dir, pictures / f"turntable_{scenario}_{prior}.png")
+    print("\nBaselines (same views and protocol):\n")
+    print("| scenario | baseline | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 |")
+    print("|---|---|---|---|---|---|---|---|")
+    for scenario, humans, unseen in baselines:
+        for k, row in enumerate(humans):
+            never = (f"{unseen[k]['psnr']:.2f} | {unseen[k]['ssim']:.4f} | {unseen[k]['lpips']:.2f}"
+                     if k < len(unseen) else "- | - | -")
+            print(f"| {scenario} | {row['label'].removeprefix('baseline: ')} | {row['psnr']:.2f} | {row['ssim']:.4f} | "
+                  f"{row['lpips']:.2f} | {never} |")
 
 
-def speed(root: Path) -> None:
-    print(f"| size | iterations | Gaussians in a render (background + people) | iterations/s | ms/iteration | "
-          f"posing + render fwd+bwd ms | iteration / (posing + render) |")
-    print("|---|---|---|---|---|---|---|")
+def speed(root: Path, priors: tuple[str, ...]) -> None:
+    print("| size | prior | iterations | Gaussians in a render (background + people) | iterations/s | ms/iteration | "
+          "posing + render fwd+bwd ms | iteration / (posing + render) | prior's share of an iteration |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for size in SPEED_SIZES:
-        run_dir = run_scene("demo", size, root, "keypoints3d", SPEED_BG_SCHEDULE,
-                            f"06_joint_opt.schedule_scale={SPEED_SCHEDULE}")
-        report = read_json(run_dir / "06_joint_opt" / "report.json")
-        render_s, count = render_seconds(run_dir)
-        per_iteration = 1.0 / report["iterations_per_s"]
-        print(f"| {size} | {report['iterations']} | {count} | {report['iterations_per_s']:.2f} | "
-              f"{per_iteration * 1e3:.0f} | {render_s * 1e3:.0f} | {per_iteration / render_s:.2f} |", flush=True)
+        without = None
+        for prior, run_dir in run_scene("demo", size, root, "keypoints3d", SPEED_BG_SCHEDULE,
+                                        f"06_joint_opt.schedule_scale={SPEED_SCHEDULE}", priors=priors):
+            report = read_json(run_dir / "06_joint_opt" / "report.json")
+            render_s, count = render_seconds(run_dir)
+            per_iteration = 1.0 / report["iterations_per_s"]
+            without = per_iteration if prior == "none" else without
+            share = f"{1.0 - without / per_iteration:.2f}" if without is not None and prior != "none" else "-"
+            print(f"| {size} | {prior} | {report['iterations']} | {count} | {report['iterations_per_s']:.2f} | "
+                  f"{per_iteration * 1e3:.0f} | {render_s * 1e3:.0f} | {per_iteration / render_s:.2f} | {share} |",
+                  flush=True)
 
 
 def main() -> int:
@@ -128,18 +203,22 @@ def main() -> int:
                         help="how stage 02 gets the bodies (provided = the ground truth)")
     parser.add_argument("--seed", type=int, default=SEED, help="the fixture scenes' seed")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed runs")
+    parser.add_argument("--priors", default="none,surface", help="stage 06's priors to compare, in order")
+    parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
                         help="stage 04's schedule_scale in the quality runs (default: pipeline.yaml's)")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
+    priors = tuple(args.priors.split(","))
     with tempfile.TemporaryDirectory() as tmp:
         if args.quality:
-            print("### stage 06, prior none: held-out quality at full size, bodies fitted to keypoints\n")
-            quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params)
+            print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
+            quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,
+                    priors, args.pictures)
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
-            speed(Path(tmp) / "speed")
+            speed(Path(tmp) / "speed", priors)
     return 0
 
 

@@ -15,20 +15,24 @@ from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.lbs import batch_rodrigues
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams, read_body_params
+from glimpse.cameras.model import PinholeCamera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError
-from glimpse.eval.score import score_views
+from glimpse.eval.never_seen import PosedBodies
+from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
 from glimpse.eval.views import ViewSet, heldout_views
 from glimpse.fixtures.scenes import make_scene
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.ply import read_gaussians_ply
 from glimpse.humans.load import load_trained_people
 from glimpse.humans.person import initial_person, joint_transforms, polar_rotation
+from glimpse.humans.visibility import BodyVisibility, body_visibility
 from glimpse.joint.config import JointConfig
 from glimpse.joint.stage import static_occlusion
 from glimpse.joint.train import people_box, reconstruction_terms
 from glimpse.lpips import LPIPS
-from glimpse.prior import make_prior, resolve_prior_kind
+from glimpse.prior import PriorContext, check_prior_kind, make_prior, resolve_prior_kind
+from glimpse.prior.config import SurfacePriorConfig
 from glimpse.render.config import RenderConfig
 from glimpse.scene import load_scene
 from tests.stage_helpers import read_json, run
@@ -36,6 +40,7 @@ from tests.stage_helpers import read_json, run
 PIPELINE = load_pipeline_yaml()
 BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
 JOINT = config_from_mapping(JointConfig, PIPELINE["06_joint_opt"], "06_joint_opt")
+SURFACE = config_from_mapping(SurfacePriorConfig, PIPELINE["prior_surface"], "prior_surface")
 RENDER = RenderConfig(backend="auto", sh_degree=2, antialiased=False)
 
 
@@ -121,11 +126,11 @@ def test_people_box_grows_to_the_minimum_size_inside_the_image():
 
 
 def test_priors_are_chosen_by_name_and_unknown_ones_are_listed():
-    assert resolve_prior_kind("auto") == "none" and make_prior("none").losses(1, []) == {}
-    with pytest.raises(ConfigError, match="issue #10"):
-        make_prior("surface")
-    with pytest.raises(ConfigError, match="registered priors: none"):
-        make_prior("magic")
+    assert resolve_prior_kind("auto") == "surface" and check_prior_kind("none") == "none"
+    with pytest.raises(ConfigError, match="issue #12"):
+        check_prior_kind("sds")
+    with pytest.raises(ConfigError, match="registered priors: none, surface"):
+        check_prior_kind("magic")
 
 
 # --- the stages on the tiny demo ------------------------------------------------------------------------
@@ -147,7 +152,8 @@ def test_stage06_writes_canonical_people_and_keeps_the_backgrounds_count(tiny):
     scene, run_dir = tiny
     out = run_dir / "06_joint_opt"
     report = read_json(out / "report.json")
-    assert report["prior"] == "none" and report["iterations"] == 240
+    assert report["prior"] == "surface" and report["iterations"] == 240  # auto: the offline prior
+    assert {"loss_prior_colour", "loss_prior_silhouette"} <= set(report["loss_history"][-1])
     before, _ = read_gaussians_ply(run_dir / "04_bg_pretrain" / "background.ply")
     after, metadata = read_gaussians_ply(out / "background.ply")
     assert len(after.means) == len(before.means) and metadata["stage"] == "06_joint_opt"
@@ -158,6 +164,8 @@ def test_stage06_writes_canonical_people_and_keeps_the_backgrounds_count(tiny):
         fitted = read_body_params(run_dir / "02_smpl_fit" / "humans" / pid / "body.npz")
         assert np.abs(body.body_pose - fitted.select(body.frame_ids).body_pose).max() > 0  # poses refined
         assert np.abs(body.body_pose - fitted.select(body.frame_ids).body_pose).max() < 0.2
+        seen = BodyVisibility.read(out / "humans" / pid / "visibility.npz").seen.mean()  # one camera: a side
+        assert 0.2 < seen < 0.8 and report["people"][pid]["body_vertices_seen"] == pytest.approx(seen, abs=1e-4)
     losses = report["loss_history"]
     assert np.mean([e["total"] for e in losses[-3:]]) < losses[0]["total"]
     assert (out / "renders" / "joint.mp4").stat().st_size > 0
@@ -171,17 +179,26 @@ def test_training_beats_the_untrained_bodies_on_held_out_views(tiny, body_model)
     grey = [initial_person(p.pid, body_model, p.body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0) for p in people]
     views = heldout_views(load_scene(scene), True)
     background = GaussianModel.from_splats(read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")[0])
+    visibility = {p.pid: BodyVisibility.read(run_dir / "06_joint_opt" / "humans" / p.pid / "visibility.npz")
+                  for p in people}
     baseline = score_views(ViewSet("held-out", "test", views), grey, background, RENDER, LPIPS("alex"),
-                           torch.device("cpu")).rows["humans"][0]
+                           torch.device("cpu"), PosedBodies(grey, visibility, body_model),
+                           [np.full(3, 0.5)] * len(grey)).rows["humans"][0]
     assert trained["psnr"] > baseline.psnr + 1.0
 
 
 def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):
     scene, run_dir = tiny
     metrics = read_json(run_dir / "07_eval" / "metrics.json")
-    assert metrics["views"].startswith("held-out") and set(metrics["tables"]) == {"humans", "people", "composite"}
+    assert metrics["views"].startswith("held-out")
+    assert set(metrics["tables"]) == {"humans", "people", "never_seen", "composite"}
+    for table in ("humans", "never_seen"):  # the render and both baselines, the render ahead of an empty one
+        rows = {row["label"]: row for row in metrics["tables"][table]["rows"]}
+        assert list(rows) == [RENDER_ROW, EMPTY_ROW, FLAT_ROW]
+        assert rows[RENDER_ROW]["lpips"] < rows[EMPTY_ROW]["lpips"]
+    assert metrics["tables"]["never_seen"]["rows"][0]["psnr"] > metrics["tables"]["never_seen"]["rows"][1]["psnr"]
     text = (run_dir / "07_eval" / "metrics.md").read_text()
-    assert "Humans only" in text and "union of the people's masks" in text
+    assert "Humans only" in text and "union of the people's masks" in text and "none of whose vertices" in text
     out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input")
     assert "INPUT view" in read_json(out / "metrics.json")["views"]
 
@@ -199,11 +216,17 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
     image = torch.as_tensor(np.random.default_rng(0).integers(0, 255, (64, 48, 3)), dtype=torch.uint8)
     views = [JointView(0, camera, image, torch.ones(64, 48, dtype=torch.bool), None)]
 
+    pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3))
+    visibility = body_visibility(body_model, {"p0": body}, {0: pinhole}, 48, 64, {}, JOINT.visibility)
+    surface = replace(SURFACE, views_per_person=2, start_at=1000, refresh_every=2500)  # from iteration 2, every 5
+
     def trainer() -> JointTrainer:
         person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 1)
         background = GaussianModel.from_points(torch.tensor([[0.0, 0.0, 10.0]]), torch.full((1, 3), 0.3),
                                                torch.tensor([5.0]), 0.5, 1)
-        return JointTrainer(background, [person], views, config, RENDER, make_prior("none"), None, 0,
+        prior = make_prior("surface", PriorContext([person], visibility, body_model, RENDER, 0, config.scaled),
+                           {"surface": surface})
+        return JointTrainer(background, [person], views, config, RENDER, prior, None, 0,
                             tmp_path / "checkpoint.pt", "key")
 
     first = trainer()

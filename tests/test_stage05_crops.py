@@ -192,7 +192,7 @@ def test_stage_writes_crops_masks_skeletons_and_a_manifest(demo):
     scene, root, out = demo
     manifest = read_json(out / "manifest.json")
     summary = manifest["summary"]
-    assert summary["identity"] == "skipped" and summary["prior_kind"] == "none"
+    assert summary["identity"] == "skipped" and summary["prior_kind"] == "surface"  # auto without weights
     assert "only the sds prior uses an identity" in summary["identity_reason"]
     masks_doc = read_json(root / "out" / "demo_tiny" / "03_masks" / "masks.json")
     for pid in ("p0", "p1"):

@@ -11,3 +11,4 @@ class EvalConfig:
     heldout: Literal["auto", "input"]
     input_view_every: int
     lpips_net: Literal["alex", "vgg"]
+    mean_colour_every: int

@@ -7,7 +7,13 @@ Three tables (GTU's protocol first, MU ``Evaluator`` / RW ``render_set`` in the 
 - **per person**: the same people-only render against the raw ground truth, restricted to that
   person's mask (masked PSNR, SSIM map mean inside the mask, LPIPS with both images zeroed
   outside it), where per-person ground-truth masks exist.
+- **never seen**: the same people-only render against the same masked ground truth, restricted to
+  the pixels whose body surface no input frame saw (glimpse.eval.never_seen), on the views that
+  have such pixels.
 - **composite**: background and people together against the whole ground-truth frame.
+
+The humans and never-seen tables carry two baselines in the same protocol: an empty (black) render
+and the fitted bodies drawn flat in each person's mean input colour.
 """
 
 from __future__ import annotations
@@ -16,9 +22,11 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from glimpse.background.stage import render_camera
+from glimpse.eval.never_seen import PosedBodies, flat_bodies
 from glimpse.eval.views import ScoredView, ViewSet
 from glimpse.gaussians.model import GaussianModel
 from glimpse.humans.person import PersonGaussians
@@ -35,7 +43,7 @@ BLACK = (0.0, 0.0, 0.0)
 
 @dataclass
 class EvalTables:
-    """Rows and protocol of each table, keyed "humans", "people", "composite"."""
+    """Rows and protocol of each table, keyed "humans", "people", "never_seen", "composite"."""
 
     rows: dict[str, list[MetricsRow]]
     protocols: dict[str, EvalProtocol]
@@ -52,40 +60,67 @@ def render_view(view: ScoredView, people: list[PersonGaussians], background: Gau
     return render_frame(camera, gaussians, len(people), render).rgb.clamp(0.0, 1.0)
 
 
+RENDER_ROW, EMPTY_ROW, FLAT_ROW = "humans only", "baseline: empty render (black)", "baseline: bodies in mean colour"
+
+
 def score_views(view_set: ViewSet, people: list[PersonGaussians], background: GaussianModel, render: RenderConfig,
-                lpips_module: LPIPS, device: torch.device) -> EvalTables:
-    humans: list[FrameMetrics] = []
+                lpips_module: LPIPS, device: torch.device, bodies: PosedBodies,
+                mean_colours: list[np.ndarray]) -> EvalTables:
+    """Score every view of ``view_set``; ``bodies`` and ``mean_colours`` (per person, RGB in [0, 1]) make the
+    never-seen masks and the flat-colour baseline."""
+    humans: dict[str, list[FrameMetrics]] = {RENDER_ROW: [], EMPTY_ROW: [], FLAT_ROW: []}
+    never_seen: dict[str, list[FrameMetrics]] = {RENDER_ROW: [], EMPTY_ROW: [], FLAT_ROW: []}
     composite: list[FrameMetrics] = []
     per_person: dict[str, list[FrameMetrics]] = {p.pid: [] for p in people}
+    unseen_share: list[float] = []
     for view in view_set.views:
         image, union, masks = view.read()
         target = torch.as_tensor(image, device=device).float() / 255.0
         union_t = torch.as_tensor(union, device=device)
-        people_only = render_view(view, people, None, render, device)
-        humans.append(frame_metrics(view.name, people_only, target * union_t[..., None], lpips_module))
+        masked_target = target * union_t[..., None]
+        view_bodies = bodies.in_view(view)
+        candidates = {RENDER_ROW: render_view(view, people, None, render, device),
+                      EMPTY_ROW: torch.zeros_like(target),
+                      FLAT_ROW: torch.as_tensor(flat_bodies(view_bodies, mean_colours), device=device)}
+        unseen = torch.as_tensor(view_bodies.never_seen & union, device=device)
+        if union.any():
+            unseen_share.append(float(unseen.sum()) / float(union.sum()))
+        for label, picture in candidates.items():
+            humans[label].append(frame_metrics(view.name, picture, masked_target, lpips_module))
+            if unseen.any():
+                never_seen[label].append(frame_metrics(view.name, picture, masked_target, lpips_module, unseen))
         for pid, mask in masks.items():
             if pid in per_person and mask.any():
-                per_person[pid].append(frame_metrics(view.name, people_only, target, lpips_module,
+                per_person[pid].append(frame_metrics(view.name, candidates[RENDER_ROW], target, lpips_module,
                                                      torch.as_tensor(mask, device=device)))
         full = render_view(view, people, background, render, device)
         composite.append(frame_metrics(view.name, full, target, lpips_module))
     net = lpips_module.net_name
     where = view_set.description
+    share = f"{100.0 * float(np.mean(unseen_share)):.1f}%" if unseen_share else "none"
     protocols = {
         "humans": EvalProtocol("ground truth blacked out outside the union of the people's masks; the render shows "
-                               "the people only", BLACK, where, net),
-        "people": EvalProtocol("each person's own ground-truth mask (frames where it is not empty); the render "
-                               "shows every person of the frame, so people in front are accounted for", None, where,
+                               "the people only; baselines: nothing rendered, and the fitted bodies drawn flat in "
+                               "each person's mean input colour", BLACK, where, net),
+        "people": EvalProtocol("each person's own ground-truth mask (frames where it is not empty); the render shows "
+                               "every person of the frame, so people in front are accounted for", None, where,
                                net),
+        "never_seen": EvalProtocol("never-seen pixels: inside the ground truth's union mask, where the nearest surface of "
+                                   "the fitted bodies (refined poses) is a triangle none of whose vertices any input "
+                                   f"frame saw (stage 06 visibility.npz); on average {share} of the union mask; "
+                                   "views without such pixels are skipped", BLACK, where, net),
         "composite": EvalProtocol("none: background and people against the whole frame", None, where, net),
     }
-    rows = {"humans": [summarize("humans only", humans)],
+    rows = {"humans": [summarize(label, frames) for label, frames in humans.items()],
             "people": [summarize(pid, frames) for pid, frames in per_person.items() if frames],
+            "never_seen": [summarize(label, frames) for label, frames in never_seen.items() if frames],
             "composite": [summarize("background + humans", composite)]}
     return EvalTables(rows, protocols)
 
 
-TITLES = {"humans": "Humans only (GTU protocol)", "people": "Per person", "composite": "Full composite"}
+TITLES = {"humans": "Humans only (GTU protocol)", "people": "Per person",
+          "never_seen": "Never-seen regions (humans only, restricted to what no input frame saw)",
+          "composite": "Full composite"}
 
 
 def write_tables(tables: EvalTables, prior: str, source: str, out: Path) -> dict:
@@ -100,7 +135,11 @@ def write_tables(tables: EvalTables, prior: str, source: str, out: Path) -> dict
 
 
 def headline(tables: EvalTables) -> dict[str, float]:
-    """The humans-only and composite means, for the manifest and the demo's printout."""
+    """The humans-only, never-seen and composite means of the render, for the manifest and the demo's printout."""
     h, c = tables.rows["humans"][0], tables.rows["composite"][0]
-    return {"humans_psnr_db": round(h.psnr, 3), "humans_ssim": round(h.ssim, 4), "humans_lpips_x100": round(h.lpips, 3),
-            "composite_psnr_db": round(c.psnr, 3)}
+    values = {"humans_psnr_db": round(h.psnr, 3), "humans_ssim": round(h.ssim, 4),
+              "humans_lpips_x100": round(h.lpips, 3), "composite_psnr_db": round(c.psnr, 3)}
+    if tables.rows["never_seen"]:
+        n = tables.rows["never_seen"][0]
+        values.update(never_seen_psnr_db=round(n.psnr, 3), never_seen_lpips_x100=round(n.lpips, 3))
+    return values

@@ -8,6 +8,7 @@ from typing import Literal
 from glimpse.background.config import scaled_iteration
 from glimpse.errors import ConfigError
 from glimpse.gaussians.optim import LearningRates
+from glimpse.humans.visibility import VisibilityConfig
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class JointConfig:
     lr: LearningRates
     background_lr: LearningRates
     density: HumanDensity
+    visibility: VisibilityConfig
     refine_pose: bool
     pose_lr: float
     checkpoint_every: int

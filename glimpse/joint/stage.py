@@ -26,7 +26,8 @@ from glimpse.joint.config import JointConfig
 from glimpse.joint.train import JointLog, JointTrainer, JointView, people_box
 from glimpse.lpips import LPIPS
 from glimpse.metrics import psnr
-from glimpse.prior.base import UnseenPrior
+from glimpse.humans.visibility import BodyVisibility, body_visibility
+from glimpse.prior import PriorContext, make_prior
 from glimpse.render.config import RenderConfig
 
 REPORT_FORMAT = "glimpse-joint-report/1"
@@ -49,6 +50,7 @@ class JointInputs:
 class JointResult:
     background: GaussianModel
     people: list[PersonGaussians]
+    visibility: dict[str, BodyVisibility]  # per pid: what the input frames saw of the fitted body
     report: dict
 
 
@@ -101,12 +103,18 @@ def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, b
 
 
 def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, body: BodyConfig,
-                body_model: BodyModel, prior: UnseenPrior, seed: int, device: torch.device, work: Path,
-                key: str, out: Path) -> JointResult:
-    """Train, then render every input view (``out/renders/joint.mp4``) and build the report."""
+                body_model: BodyModel, prior_kind: str, prior_settings: dict, seed: int, device: torch.device,
+                work: Path, key: str, out: Path) -> JointResult:
+    """Train with the prior ``prior_kind`` (its pipeline.yaml section in ``prior_settings``), then render every
+    input view (``out/renders/joint.mp4``) and build the report."""
     torch.manual_seed(seed)
     views = load_views(inputs, config, device)
     people = initial_people(inputs, config, body, body_model, render.sh_degree, device)
+    hidden = {view.frame_id: ~view.keep.cpu().numpy() for view in views}
+    visibility = body_visibility(body_model, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
+                                 inputs.height, hidden, config.visibility)
+    prior = make_prior(prior_kind, PriorContext(people, visibility, body_model, render, seed, config.scaled),
+                       prior_settings)
     initial_counts = {p.pid: len(p.model) for p in people}
     background = inputs.background.to(device)
     lpips_module = LPIPS(config.loss.lpips_net).to(device) if config.loss.lpips > 0 else None
@@ -115,7 +123,9 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     training = trainer.run()
     frames_doc = _write_views(trainer, views, config, inputs, out)
     report = _report(training, config, people, initial_counts, frames_doc, prior.name)
-    return JointResult(background, people, report)
+    for person in people:
+        report["people"][person.pid]["body_vertices_seen"] = round(float(visibility[person.pid].seen.mean()), 4)
+    return JointResult(background, people, visibility, report)
 
 
 @torch.no_grad()

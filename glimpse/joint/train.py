@@ -151,6 +151,7 @@ class JointTrainer:
                            for p in self.people],
                 "optimizers": [o.state_dict() for o in self._optimizers()],
                 "stats": [{k: v.cpu() for k, v in s.state_dict().items()} for s in self.stats],
+                "prior": self.prior.state_dict(),
                 "losses": self.log.losses, "densify_events": self.log.densify_events}
 
     def _restore(self, state: dict) -> None:
@@ -165,6 +166,7 @@ class JointTrainer:
             optimizer.load_state_dict(saved)
         for stats, saved in zip(self.stats, state["stats"]):
             stats.load_state_dict({k: v.to(device) for k, v in saved.items()})
+        self.prior.load_state_dict(state["prior"])
         self.log.losses, self.log.densify_events = list(state["losses"]), list(state["densify_events"])
         self.step = self.log.resumed_from = int(state["step"])
 
@@ -236,6 +238,7 @@ class JointTrainer:
                 event["pruned_large_or_transparent"] = prune_person(person, optimizer, self.stats[k], config)
             event["count"] = len(person.model)
             self.log.densify_events.append(event)
+            self.prior.gaussians_changed(person)
 
     # --- the run -------------------------------------------------------------------------------
 

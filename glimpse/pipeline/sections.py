@@ -12,7 +12,7 @@ from glimpse.eval.config import EvalConfig
 from glimpse.fit.config import FitConfig
 from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
-from glimpse.prior.config import PriorConfig
+from glimpse.prior.config import PriorConfig, SurfacePriorConfig
 from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -20,6 +20,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "body": BodyConfig,
     "render": RenderConfig,
     "prior": PriorConfig,
+    "prior_surface": SurfacePriorConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,

@@ -68,7 +68,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute", "body", "render", "prior"),
+        shared=("compute", "body", "render", "prior", "prior_surface"),
         scene_inputs=(),
     ),
     StageSpec(
@@ -80,7 +80,7 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior")
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_surface")
 
 
 def stage_spec(name: str) -> StageSpec:

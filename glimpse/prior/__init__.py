@@ -1,18 +1,22 @@
 """Priors over the unseen parts of people, registered by name (pipeline.yaml ``prior.kind``).
 
-Registered here by explicit import; ``make_prior`` builds one, ``resolve_prior_kind`` turns
-``auto`` into a concrete kind (CONTRACTS.md "Default prior").
+Registered here by explicit import; ``make_prior`` builds one with its own pipeline.yaml section
+(``prior_<name>``, when it has one), ``resolve_prior_kind`` turns ``auto`` into a concrete kind
+(CONTRACTS.md "Default prior").
 """
 
 from __future__ import annotations
 
-from glimpse.errors import ConfigError
-from glimpse.prior.base import UnseenPrior
-from glimpse.prior.none import NoPrior
+from typing import Any
 
-PRIORS: dict[str, type[UnseenPrior]] = {NoPrior.name: NoPrior}
+from glimpse.errors import ConfigError
+from glimpse.prior.base import PriorContext, UnseenPrior
+from glimpse.prior.none import NoPrior
+from glimpse.prior.surface import SurfacePrior
+
+PRIORS: dict[str, type[UnseenPrior]] = {NoPrior.name: NoPrior, SurfacePrior.name: SurfacePrior}
 AUTO_ORDER = ("sds", "surface", "none")
-PLANNED = {"surface": "issue #10 (the offline prior)", "sds": "issue #12 (the diffusion prior)"}
+PLANNED = {"sds": "issue #12 (the diffusion prior)"}
 
 
 def resolve_prior_kind(kind: str) -> str:
@@ -23,11 +27,11 @@ def resolve_prior_kind(kind: str) -> str:
     return next(name for name in AUTO_ORDER if name in PRIORS)
 
 
-def make_prior(kind: str) -> UnseenPrior:
-    """The prior registered under ``kind`` (after resolving ``auto``); unknown names list the known ones."""
+def check_prior_kind(kind: str) -> str:
+    """The resolved kind, or a ConfigError naming what is registered."""
     name = resolve_prior_kind(kind)
     if name in PRIORS:
-        return PRIORS[name]()
+        return name
     if name in PLANNED:
         raise ConfigError(f"pipeline.yaml prior.kind: {name!r} is not available yet (it arrives with {PLANNED[name]}); "
                           f"registered priors: {', '.join(PRIORS)} (or auto)")
@@ -35,4 +39,11 @@ def make_prior(kind: str) -> UnseenPrior:
                       f"{', '.join(PRIORS)} (or auto)")
 
 
-__all__ = ["PRIORS", "UnseenPrior", "make_prior", "resolve_prior_kind"]
+def make_prior(kind: str, context: PriorContext, settings: dict[str, Any]) -> UnseenPrior:
+    """The prior registered under ``kind`` (after resolving ``auto``), built with ``settings[name]`` (its
+    pipeline.yaml section; None when it has none)."""
+    name = check_prior_kind(kind)
+    return PRIORS[name](context, settings.get(name))
+
+
+__all__ = ["PRIORS", "PriorContext", "UnseenPrior", "check_prior_kind", "make_prior", "resolve_prior_kind"]

@@ -8,11 +8,14 @@ from collections.abc import Sequence
 from torch import Tensor
 
 from glimpse.humans.person import PersonGaussians
-from glimpse.prior.base import UnseenPrior
+from glimpse.prior.base import PriorContext, UnseenPrior
 
 
 class NoPrior(UnseenPrior):
     name = "none"
+
+    def __init__(self, context: PriorContext | None = None, config: object = None):
+        del context, config  # nothing to prepare
 
     def losses(self, step: int, people: Sequence[PersonGaussians]) -> dict[str, Tensor]:
         return {}

@@ -2,11 +2,13 @@
 
 Inputs:  01_sfm/ (frames, cameras.json), 02_smpl_fit/humans/<pid>/body.npz, 03_masks/ (masks/union/,
          occluders/<pid>/), 04_bg_pretrain/background.ply; 05_textual_inversion/ (used by the sds prior).
-Params:  06_joint_opt, prior, body, render, compute (pipeline.yaml).
+Params:  06_joint_opt, prior, prior_surface, body, render, compute (pipeline.yaml).
 Outputs (OUT/<scene>/06_joint_opt/, CONTRACTS.md):
   humans/<pid>/canonical.ply   the person's Gaussians in the canonical (Da-pose) body frame, 3DGS layout
   humans/<pid>/skinning.npz    glimpse-skinning/1: skin-weight grid, its bounds and resolution
   humans/<pid>/body.npz        glimpse-body-params/1: the body parameters with the refined poses
+  humans/<pid>/visibility.npz  glimpse-visibility/1: per body vertex, how many input frames saw it, the most
+                               head-on cosine and the finest pixels per metre (stage 02's bodies)
   background.ply               the background Gaussians after joint training (same count as stage 04's)
   report.json                  glimpse-joint-report/1: prior used, losses, Gaussian counts, densification,
                                per-frame PSNR on the input views, iterations per second
@@ -30,10 +32,11 @@ from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import GAUSSIANS_FORMAT, read_gaussians_ply, write_gaussians_ply  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.humans.visibility import VISIBILITY_FORMAT  # noqa: E402
 from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
 from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
-from glimpse.prior import make_prior  # noqa: E402
+from glimpse.prior import check_prior_kind  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "06_joint_opt"
@@ -42,7 +45,7 @@ UPSTREAM = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_i
 
 def run(ctx: StageContext) -> None:
     config, render, body, compute = (ctx.section(name) for name in (STAGE, "render", "body", "compute"))
-    prior = make_prior(ctx.section("prior").kind)
+    prior_kind = check_prior_kind(ctx.section("prior").kind)
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     dirs = {name: ctx.upstream_dir(name) for name in UPSTREAM}
@@ -54,7 +57,8 @@ def run(ctx: StageContext) -> None:
     body_model = BodyModel.from_file(resolve_model_path(body))
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in dirs.values()])
     with ctx.timed("train"):
-        result = train_joint(inputs, config, render, body, body_model, prior, compute.seed, resolve_device(compute),
+        result = train_joint(inputs, config, render, body, body_model, prior_kind,
+                             {"surface": ctx.section("prior_surface")}, compute.seed, resolve_device(compute),
                              ctx.work, key, ctx.out)
     for person in result.people:
         folder = ctx.out / "humans" / person.pid
@@ -64,9 +68,11 @@ def run(ctx: StageContext) -> None:
                              "frame": "canonical", "canonical_hip_angle_deg": str(body.canonical_hip_angle_deg)})
         np.savez(folder / "skinning.npz", **person.grid.to_npz_dict(), resolution=np.array(person.grid.resolution))
         write_body_params(folder / "body.npz", person.refined_body())
+        result.visibility[person.pid].write(folder / "visibility.npz")
         ctx.formats.update({f"humans/{person.pid}/canonical.ply": GAUSSIANS_FORMAT,
                             f"humans/{person.pid}/skinning.npz": SKINNING_FORMAT,
-                            f"humans/{person.pid}/body.npz": BODY_PARAMS_FORMAT})
+                            f"humans/{person.pid}/body.npz": BODY_PARAMS_FORMAT,
+                            f"humans/{person.pid}/visibility.npz": VISIBILITY_FORMAT})
     write_gaussians_ply(ctx.out / "background.ply", result.background.to_splats(),
                         {"sh_degree": str(result.background.sh_degree), "stage": STAGE})
     write_json(ctx.out / "report.json", result.report)

@@ -1,13 +1,16 @@
 """Stage 07: metrics of stage 06's reconstruction on held-out views (renders, edits and speed: issue #11).
 
-Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (when scoring the input view),
-         06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz, body.npz}, background.ply, manifest);
+Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (the people's mean colours; the ground
+         truth when scoring the input view), 06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz,
+         body.npz, visibility.npz}, background.ply, manifest);
          the scene's eval/ (held-out cameras, ground-truth images and masks).
 Params:  07_eval, body, render, compute (pipeline.yaml).
 Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
   metrics.json   glimpse-eval-metrics/1: tables "humans" (GTU's protocol: people only on black against the
                  ground truth masked by the union human mask), "people" (each person inside their own mask),
-                 "composite" (the whole frame); per-view values and each table's protocol
+                 "never_seen" (humans only, restricted to the body surface no input frame saw), "composite"
+                 (the whole frame); baselines (empty render, bodies in mean colour) in the humans and
+                 never-seen tables; per-view values and each table's protocol
   metrics.md     the same tables in Markdown, each followed by its protocol
 """
 
@@ -21,11 +24,13 @@ from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.errors import GlimpseError  # noqa: E402
+from glimpse.eval.never_seen import PosedBodies, person_mean_colours  # noqa: E402
 from glimpse.eval.score import METRICS_FORMAT, headline, score_views, write_tables  # noqa: E402
 from glimpse.eval.views import choose_views  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
 from glimpse.humans.load import load_trained_people  # noqa: E402
+from glimpse.humans.visibility import BodyVisibility  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.lpips import LPIPS  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
@@ -47,11 +52,15 @@ def run(ctx: StageContext) -> None:
                             masks / "masks")
     if not view_set.views:
         raise GlimpseError(f"07_eval: no view to score (no eval/ image and no input frame with a camera in {sfm})")
-    people = [p.to(device) for p in load_trained_people(joint / "humans", BodyModel.from_file(resolve_model_path(body)))]
+    body_model = BodyModel.from_file(resolve_model_path(body))
+    people = [p.to(device) for p in load_trained_people(joint / "humans", body_model)]
+    visibility = {p.pid: BodyVisibility.read(joint / "humans" / p.pid / "visibility.npz") for p in people}
+    colours = person_mean_colours(sfm / "frames", masks / "masks", [p.pid for p in people], config.mean_colour_every)
     background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0]).to(device)
     prior = json.loads((joint / "manifest.json").read_text()).get("summary", {}).get("prior", "unknown")
     with ctx.timed("score"):
-        tables = score_views(view_set, people, background, render, LPIPS(config.lpips_net).to(device), device)
+        tables = score_views(view_set, people, background, render, LPIPS(config.lpips_net).to(device), device,
+                             PosedBodies(people, visibility, body_model), [colours[p.pid] for p in people])
     write_tables(tables, prior, view_set.description, ctx.out)
     ctx.formats.update({"metrics.json": METRICS_FORMAT, "metrics.md": "markdown"})
     ctx.summary.update({"views": view_set.source, "view_count": len(view_set.views), "prior": prior,

@@ -1,0 +1,211 @@
+"""``prior.kind: surface``: complete each person without diffusion weights (docs/prior.md).
+
+What the input views saw of each person is known per body vertex (glimpse.humans.visibility); each
+canonical Gaussian belongs to its nearest Da-pose body vertex, and is *unseen* when that vertex was
+seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every iteration from
+``start_at`` on, for the people of the view:
+
+- ``loss_prior_colour``: each unseen Gaussian's base colour (SH DC) against a completed colour of its
+  vertex, plus ``view_dependent`` x its higher SH coefficients (no view taught them anything). The
+  completed colours are recomputed at most every ``refresh_every`` iterations: the opacity-weighted
+  mean colour of the Gaussians of each vertex seen within ``colour_max_angle_deg`` of head-on,
+  extended to the rest of the body over the mesh plus left-right mirror edges, pulled with
+  ``part_anchor`` towards the seen mean of the vertex's body part (glimpse.prior.complete).
+- ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
+  excess over the margin squared; nothing else holds them on the body.
+- ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
+  one, by how much: the needles ("hedgehogs", paper Fig. 3) a single view leaves behind.
+- ``loss_prior_silhouette``: one person (in turn) rendered alone in the canonical frame from one of
+  ``views_per_person`` fixed random orbit cameras (glimpse.prior.orbit), against that view's body
+  silhouette: transparency inside the silhouette shrunk by ``silhouette_margin_m`` (holes) weighted
+  ``silhouette_fill``, opacity outside it grown by the margin (spikes, floaters) ``silhouette_trim``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+from torch import Tensor
+
+from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
+from glimpse.humans.person import PersonGaussians
+from glimpse.masks.assign import disk
+from glimpse.prior.base import PriorContext, UnseenPrior
+from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means
+from glimpse.prior.config import SurfacePriorConfig
+from glimpse.prior.orbit import sample_orbit_views
+from glimpse.render import Camera, rasterize
+from glimpse.render.mesh_raster import rasterize_triangles
+from glimpse.render.sh import sh_dc_to_rgb
+
+VIEW_SEED_OFFSET = 7_919  # separates the orbit bank's random stream from the run's other streams
+
+
+@dataclass
+class SilhouetteView:
+    """One orbit camera around a person's canonical body and its targets, [S, S] bool each."""
+
+    camera: Camera
+    inside: Tensor  # the body's silhouette shrunk by the margin: should be opaque
+    outside: Tensor  # outside the silhouette grown by the margin: should be empty
+
+
+@dataclass
+class PersonPrior:
+    """Per person: the canonical vertices [V, 3] (tree for nearest-vertex lookups), which vertices the
+    input views saw [V], the completed vertex colours [V, 3] and the iteration they were computed at
+    (0: never), the nearest vertex of each Gaussian [N] (None: recompute), and the silhouette views."""
+
+    tree: cKDTree
+    vertices: Tensor
+    seen: Tensor
+    colour_source: Tensor  # [V] bool: seen head-on enough to lend its colour
+    vertex_colours: Tensor
+    coloured_at: int
+    nearest: Tensor | None
+    views: list[SilhouetteView]
+
+
+class SurfacePrior(UnseenPrior):
+    name = "surface"
+
+    def __init__(self, context: PriorContext, config: SurfacePriorConfig):
+        self.config, self.render, self.scaled, self.seed = config, context.render, context.scaled, context.seed
+        faces = context.body_model.faces.cpu().numpy()
+        mirror, _ = mirror_vertex_map(context.body_model.v_template.double().cpu().numpy())
+        self.graph = body_graph(mesh_edges(faces), mirror, config.mirror_weight, context.body_model.num_vertices)
+        self.groups = part_groups(context.body_model.weights.argmax(dim=1).cpu().numpy(), mirror)
+        min_cosine = math.cos(math.radians(config.colour_max_angle_deg))
+        rng = np.random.default_rng(context.seed + VIEW_SEED_OFFSET)
+        self.people: dict[str, PersonPrior] = {}
+        for person in context.people:
+            vertices = person.rig.canonical_vertices.detach()
+            record = context.visibility[person.pid]
+            seen = torch.as_tensor(record.seen_frames >= config.min_seen_frames, device=vertices.device)
+            source = seen & torch.as_tensor(record.best_cosine >= min_cosine, device=vertices.device)
+            self.people[person.pid] = PersonPrior(
+                cKDTree(vertices.double().cpu().numpy()), vertices, seen, source, torch.zeros_like(vertices), 0,
+                None, self._silhouette_views(vertices, faces, rng))
+
+    def _silhouette_views(self, vertices: Tensor, faces: np.ndarray, rng: np.random.Generator) -> list[SilhouetteView]:
+        points = vertices.double().cpu().numpy()
+        centre = 0.5 * (points.min(0) + points.max(0))
+        orbit, device = self.config.orbit, vertices.device
+        margin_px = self.config.silhouette_margin_m * (0.5 * orbit.size_px / np.tan(np.radians(orbit.fovy_deg) / 2)
+                                                       ) / orbit.radius_m
+        views = []
+        for view in sample_orbit_views(centre, self.config.views_per_person, orbit, rng):
+            cam = view.camera
+            body = rasterize_triangles(points @ cam.R.T + cam.t, faces, cam.K, view.size, view.size).face >= 0
+
+            def tensor(a: np.ndarray) -> Tensor:
+                return torch.as_tensor(np.asarray(a, np.float32), device=device)
+
+            views.append(SilhouetteView(
+                Camera(tensor(cam.K), tensor(cam.R), tensor(cam.t), view.size, view.size),
+                torch.as_tensor(disk(body, margin_px, grow=False), device=device),
+                torch.as_tensor(~disk(body, margin_px, grow=True), device=device)))
+        return views
+
+    # --- cached state ------------------------------------------------------------------------------
+
+    def gaussians_changed(self, person: PersonGaussians) -> None:
+        self.people[person.pid].nearest = None
+
+    def _nearest(self, person: PersonGaussians) -> Tensor:
+        state = self.people[person.pid]
+        if state.nearest is None or len(state.nearest) != len(person.model):
+            _, index = state.tree.query(person.model.means.detach().double().cpu().numpy())
+            state.nearest = torch.as_tensor(index, dtype=torch.long, device=person.model.means.device)
+        return state.nearest
+
+    @torch.no_grad()
+    def _refresh_colours(self, person: PersonGaussians, step: int) -> None:
+        """The seen vertices' colours from their Gaussians, completed over the rest of the body."""
+        state = self.people[person.pid]
+        state.nearest, state.coloured_at = None, step
+        nearest = self._nearest(person)
+        weights = person.model.opacities().detach()
+        colours = sh_dc_to_rgb(person.model.sh_dc.detach()[:, 0]).clamp(0.0, 1.0)
+        count = len(state.vertices)
+        total = torch.zeros(count, 3, device=weights.device).index_add_(0, nearest, colours * weights[:, None])
+        mass = torch.zeros(count, device=weights.device).index_add_(0, nearest, weights)
+        known = (state.colour_source & (mass > 0)).cpu().numpy()
+        mean = (total / mass.clamp(min=1e-12)[:, None]).double().cpu().numpy()
+        filled = harmonic_fill(mean, known, self.graph, part_means(mean, known, self.groups), self.config.part_anchor)
+        state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
+
+    def state_dict(self) -> dict:
+        return {pid: {"vertex_colours": p.vertex_colours.cpu(), "coloured_at": p.coloured_at,
+                      "nearest": None if p.nearest is None else p.nearest.cpu()} for pid, p in self.people.items()}
+
+    def load_state_dict(self, state: dict) -> None:
+        for pid, saved in state.items():
+            person = self.people[pid]
+            person.vertex_colours = saved["vertex_colours"].to(person.vertices.device)
+            person.coloured_at = int(saved["coloured_at"])
+            person.nearest = None if saved["nearest"] is None else saved["nearest"].to(person.vertices.device)
+
+    # --- the losses --------------------------------------------------------------------------------
+
+    def losses(self, step: int, people: Sequence[PersonGaussians]) -> dict[str, Tensor]:
+        config = self.config
+        start = self.scaled(config.start_at)
+        if step < start or not people:
+            return {}
+        for person in people:
+            coloured_at = self.people[person.pid].coloured_at
+            if coloured_at == 0 or step - coloured_at >= self.scaled(config.refresh_every):
+                self._refresh_colours(person, step)
+        terms: dict[str, list[Tensor]] = {"colour": [], "surface": [], "needle": []}
+        for person in people:
+            colour, surface = self._unseen_terms(person)
+            terms["colour"].append(colour)
+            terms["surface"].append(surface)
+            terms["needle"].append(self._needle_term(person))
+        weights = {"colour": config.colour, "surface": config.surface, "needle": config.needle}
+        out = {f"loss_prior_{name}": weights[name] * torch.stack(values).sum()
+               for name, values in terms.items() if weights[name] > 0}
+        if config.silhouette_fill > 0 or config.silhouette_trim > 0:
+            out["loss_prior_silhouette"] = self._silhouette_term(step, people[step % len(people)])
+        return out
+
+    def _unseen_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor]:
+        """(colour term, surface term) of the person's unseen Gaussians (zero when every one was seen)."""
+        state, model = self.people[person.pid], person.model
+        nearest = self._nearest(person)
+        unseen = ~state.seen[nearest]
+        if not unseen.any():
+            zero = model.means.sum() * 0.0
+            return zero, zero
+        rgb = sh_dc_to_rgb(model.sh_dc[unseen, 0])
+        colour = (rgb - state.vertex_colours[nearest[unseen]]).square().sum(1).mean()
+        if model.sh_rest.shape[1] > 0 and self.config.view_dependent > 0:
+            colour = colour + self.config.view_dependent * model.sh_rest[unseen].square().sum((1, 2)).mean()
+        distance = (model.means[unseen] - state.vertices[nearest[unseen]]).norm(dim=1)
+        margin = self.config.surface_margin_m
+        surface = ((distance - margin).clamp(min=0.0) / margin).square().mean()
+        return colour, surface
+
+    def _needle_term(self, person: PersonGaussians) -> Tensor:
+        scales = person.model.scales().sort(dim=1).values  # ascending
+        ratio = scales[:, 2] / scales[:, 1].clamp(min=1e-9)
+        return (ratio - self.config.needle_ratio).clamp(min=0.0).mean()
+
+    def _silhouette_term(self, step: int, person: PersonGaussians) -> Tensor:
+        """The person alone, canonical frame, from one of their orbit views chosen by ``step``."""
+        views = self.people[person.pid].views
+        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + step)
+        view = views[int(torch.randint(len(views), (1,), generator=generator))]
+        model = person.model
+        out = rasterize(view.camera, means=model.means, opacities=model.opacities(), quats=model.quats,
+                        scales=model.scales(), colors=sh_dc_to_rgb(model.sh_dc[:, 0]).clamp(0.0, 1.0),
+                        backend=self.render.backend, antialiased=self.render.antialiased)
+        fill = (1.0 - out.alpha[view.inside]).mean() if view.inside.any() else out.alpha.sum() * 0.0
+        trim = out.alpha[view.outside].mean() if view.outside.any() else out.alpha.sum() * 0.0
+        return self.config.silhouette_fill * fill + self.config.silhouette_trim * trim
