@@ -19,6 +19,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
 from glimpse.gaussians.model import GaussianModel
 from glimpse.humans.person import PersonGaussians, initial_person
+from glimpse.humans.visibility import BodyVisibility, body_visibility
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.io.video import write_mp4
 from glimpse.joint.compose import frame_gaussians, render_frame
@@ -26,7 +27,6 @@ from glimpse.joint.config import JointConfig
 from glimpse.joint.train import JointLog, JointTrainer, JointView, people_box
 from glimpse.lpips import LPIPS
 from glimpse.metrics import psnr
-from glimpse.humans.visibility import BodyVisibility, body_visibility
 from glimpse.prior import PriorContext, make_prior
 from glimpse.render.config import RenderConfig
 
