@@ -21,7 +21,7 @@ from glimpse.eval.views import ScoredView
 from glimpse.humans.person import PersonGaussians
 from glimpse.humans.visibility import BodyVisibility, posed_vertices
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
-from glimpse.render.mesh_raster import rasterize_triangles
+from glimpse.render.mesh_raster import rasterize_meshes
 
 
 @dataclass(frozen=True)
@@ -52,9 +52,7 @@ class PosedBodies:
         points = [self.vertices[k][self.people[k].row_of_frame[view.frame_id]] @ camera.R.T + camera.t
                   for k in present]
         count = len(self.faces)
-        raster = rasterize_triangles(np.concatenate(points),
-                                     np.concatenate([self.faces + i * len(points[0]) for i in range(len(points))]),
-                                     camera.K, view.width, view.height)
+        raster = rasterize_meshes(points, self.faces, camera.K, view.width, view.height)
         covered = raster.face >= 0
         slot = np.where(covered, raster.face // count, 0)
         owner = np.where(covered, np.asarray(present)[slot], -1)

@@ -26,7 +26,7 @@ from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
-from glimpse.render.mesh_raster import NEAR, rasterize_triangles
+from glimpse.render.mesh_raster import NEAR, rasterize_meshes
 
 VISIBILITY_FORMAT = "glimpse-visibility/1"
 
@@ -93,8 +93,7 @@ def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.nd
     cam = [v @ camera.R.T + camera.t for v in bodies]
     if not cam:
         return []
-    raster = rasterize_triangles(np.concatenate(cam), np.concatenate([faces + k * len(cam[0]) for k in range(len(cam))]),
-                                 camera.K, width, height)
+    raster = rasterize_meshes(cam, faces, camera.K, width, height)
     focal = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
     cos_min = math.cos(math.radians(config.max_view_angle_deg))
     result = []

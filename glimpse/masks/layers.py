@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from glimpse.cameras.model import PinholeCamera
-from glimpse.render.mesh_raster import rasterize_triangles
+from glimpse.render.mesh_raster import rasterize_meshes, rasterize_triangles
 
 
 @dataclass(frozen=True)
@@ -35,8 +35,7 @@ def body_layers(vertices: list[np.ndarray], pelvis: list[np.ndarray], faces: np.
         return BodyLayers(np.full((height, width), -1, np.int64), np.zeros((0, height, width), np.int64), np.zeros(0))
     cam = [v @ camera.R.T + camera.t for v in vertices]
     own = np.stack([rasterize_triangles(c, faces, camera.K, width, height).face for c in cam])
-    together = rasterize_triangles(np.concatenate(cam), np.concatenate([faces + k * len(cam[0]) for k in range(count)]),
-                                   camera.K, width, height)
+    together = rasterize_meshes(cam, faces, camera.K, width, height)
     owner = np.where(together.face >= 0, together.face // len(faces), -1)
     depth = np.array([(p @ camera.R.T + camera.t)[2] for p in pelvis])
     return BodyLayers(owner, own, depth)

@@ -32,6 +32,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
+from glimpse.background.stage import render_camera
 from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
 from glimpse.humans.person import PersonGaussians
 from glimpse.masks.assign import disk
@@ -102,12 +103,8 @@ class SurfacePrior(UnseenPrior):
         for view in sample_orbit_views(centre, self.config.views_per_person, orbit, rng):
             cam = view.camera
             body = rasterize_triangles(points @ cam.R.T + cam.t, faces, cam.K, view.size, view.size).face >= 0
-
-            def tensor(a: np.ndarray) -> Tensor:
-                return torch.as_tensor(np.asarray(a, np.float32), device=device)
-
             views.append(SilhouetteView(
-                Camera(tensor(cam.K), tensor(cam.R), tensor(cam.t), view.size, view.size),
+                render_camera(cam, view.size, view.size, device),
                 torch.as_tensor(disk(body, margin_px, grow=False), device=device),
                 torch.as_tensor(~disk(body, margin_px, grow=True), device=device)))
         return views

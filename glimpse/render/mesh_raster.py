@@ -68,6 +68,15 @@ def rasterize_triangles(points: np.ndarray, faces: np.ndarray, K: np.ndarray, wi
     return MeshRaster(depth_map.reshape(height, width), face_map.reshape(height, width))
 
 
+def rasterize_meshes(meshes: list[np.ndarray], faces: np.ndarray, K: np.ndarray, width: int, height: int
+                     ) -> MeshRaster:
+    """Several meshes of one topology (each [V, 3], camera coordinates; faces [F, 3]) in one z-buffer; the face
+    index of mesh k's triangle f is ``k * F + f``, so ``face // F`` says whose surface is nearest."""
+    return rasterize_triangles(np.concatenate(meshes),
+                               np.concatenate([faces + k * len(meshes[0]) for k in range(len(meshes))]),
+                               K, width, height)
+
+
 def _cover(uv: np.ndarray, inv_z: np.ndarray, low: np.ndarray, high: np.ndarray, side: int):
     """Pixels of each triangle's box (side x side from ``low``, clipped at ``high``) inside it:
     (triangle row, u, v, depth) arrays, or None. uv [N, 3, 2]; inv_z [N, 3] = 1 / z of the corners."""
