@@ -10,7 +10,7 @@ from glimpse.errors import GlimpseError
 from glimpse.fixtures.scenes import FREE_BODY, make_scene
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.images import read_mask
-from glimpse.masks.assign import body_frame_masks, plate_refiner, provided_frame_masks
+from glimpse.masks.assign import body_frame_masks, grow_within, plate_refiner, provided_frame_masks
 from glimpse.masks.layers import BodyLayers, body_layers
 from glimpse.masks.plate import median_plate
 from glimpse.masks.static import SurfaceMotion, temporal_std
@@ -52,9 +52,22 @@ def test_provided_masks_give_occluders_where_the_body_is_not_visible():
     layers = _squares()
     visible = np.stack([(layers.owner == 0), (layers.owner == 1)])
     visible[0, 12:15, 2:8] = False  # something hides body 0 there
-    masks = provided_frame_masks(layers, visible, np.zeros(2), np.zeros(2))
+    masks = provided_frame_masks(layers, visible, np.zeros(2), np.zeros(2), np.zeros(2))
     assert masks.occluders[0, 12:15, 2:8].all() and masks.occluders[0, 5:15, 8:12].all()
     assert not masks.occluders[0, 5:12, 2:8].any()
+
+
+def test_static_scene_reaches_thin_parts_along_the_body_only():
+    seed = np.zeros((12, 12), bool)
+    seed[2:5, 2:5] = True  # the eroded interior behind a 'table'
+    within = seed.copy()
+    within[5:11, 3] = True  # a thin 'foot' hanging from it, one pixel wide
+    within[2:5, 8:11] = True  # static pixels of the body not connected to the interior
+    grown = grow_within(seed, within, 4.0)
+    assert grown[5:9, 3].all() and not grown[9:, 3].any()  # four steps along the foot, no more
+    assert not grown[2:5, 8:11].any() and not (grown & ~within).any()
+    assert (grow_within(seed, within, 0.0) == seed).all() and (grow_within(seed, within, 50.0) == (
+        within & ~np.isin(np.arange(12), range(8, 11))[None, :])).all()
 
 
 def test_plate_is_the_median_of_uncovered_pixels_and_unknown_where_always_covered():
@@ -152,7 +165,7 @@ def test_body_masks_match_the_true_masks_and_find_the_table(lower_body):
         occluder = read_mask(result / "occluders" / "p0" / f"{fid:06d}.png")
         found += (hidden & occluder).sum()
         hidden_total += hidden.sum()
-    assert hidden_total > 200 and found / hidden_total > 0.8
+    assert hidden_total > 200 and found / hidden_total > 0.97  # 0.995; 0.87 without static_reach_m (feet)
     union = read_mask(result / "masks" / "union" / "000012.png")
     assert (union == read_mask(result / "masks" / "p0" / "000012.png")).all()
 

@@ -23,7 +23,7 @@ from glimpse.eval.views import ScoredView
 from glimpse.humans.person import initial_person
 from glimpse.humans.visibility import BodyVisibility, VisibilityConfig, body_visibility, vertex_normals
 from glimpse.prior import PriorContext, make_prior
-from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means
+from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means, part_parents
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.prior.orbit import orbit_camera
 from glimpse.render.config import RenderConfig
@@ -102,6 +102,20 @@ def test_far_from_anything_seen_a_vertex_settles_on_its_parts_seen_colour():
     assert abs(filled[-1, 0] - 3.0) < 1e-3 and filled[1, 0] == 3.0
     mirrored = part_groups(np.array([0, 1, 2, 3]), np.array([1, 0, 3, 2]))
     assert mirrored.tolist() == [0, 0, 2, 2]  # a part and its mirror form one group
+
+
+def test_a_part_never_seen_takes_its_nearest_seen_ancestors_colour():
+    # joints: 0 root (torso) -> 1 thigh -> 2 shin -> 3 foot; joint 4 labels no vertex, its child 5 hangs on it
+    joint_parents = np.array([-1, 0, 1, 2, 0, 4])
+    labels = np.array([0, 0, 1, 1, 2, 2, 3, 5])
+    groups = part_groups(labels, np.arange(len(labels)))
+    parents = part_parents(labels, groups, joint_parents)
+    assert parents[[0, 1, 2, 3, 5]].tolist() == [-1, 0, 1, 2, 0]  # joint 5 skips the vertex-less joint 4
+    values = np.array([[1.0], [1.0], [4.0], [6.0], [0.0], [0.0], [0.0], [0.0]])
+    known = np.array([True, True, True, True, False, False, False, False])
+    anchors = part_means(values, known, groups, parents)
+    assert anchors[:, 0].tolist() == [1.0, 1.0, 5.0, 5.0, 5.0, 5.0, 5.0, 1.0]  # shin and foot: the thigh's
+    assert part_means(values, known, groups)[4:, 0].tolist() == [3.0] * 4  # without parents: the overall mean
 
 
 def test_an_island_without_known_vertices_takes_the_known_mean():

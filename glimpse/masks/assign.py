@@ -7,8 +7,9 @@ Body mode, people taken nearest first (pelvis depth, as GTU):
               background in the band, an occluder over the body).
 Provided mode: visible_p is given (the scene's masks).
 Both: hidden_p = p's full projection where another person is visible (body mode: a nearer one),
-or where static scene is in front (provided mode: the interior, eroded by ``erode_px[p]``, where
-no person is visible); occluder_p = hidden_p grown by ``occluder_px[p]``.
+or where static scene is in front (the interior, eroded by ``erode_px[p]``, where static scene
+shows (body mode) or no person is visible (provided mode), grown inside the body by ``reach_px[p]``
+through such pixels); occluder_p = hidden_p grown by ``occluder_px[p]``.
 """
 
 from __future__ import annotations
@@ -42,6 +43,21 @@ def disk(mask: np.ndarray, radius_px: float, grow: bool = True) -> np.ndarray:
     return op(mask.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
 
 
+def grow_within(seed: np.ndarray, within: np.ndarray, steps_px: float) -> np.ndarray:
+    """seed [H, W] bool grown one pixel (4-neighbours) at a time, ``steps_px`` times (rounded), never
+    leaving ``within`` [H, W] bool: the pixels of ``within`` at most that far from the seed along paths
+    inside ``within`` (a bounded morphological reconstruction), plus the seed."""
+    kernel = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    grown = seed.astype(np.uint8)
+    allowed = (within | seed).astype(np.uint8)
+    for _ in range(int(round(steps_px))):
+        step = cv2.dilate(grown, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) & allowed
+        if np.array_equal(step, grown):
+            break
+        grown = step
+    return grown.astype(bool)
+
+
 # refine(body index, region [H, W], sure [H, W], forbidden [H, W]) -> refined region [H, W]
 Refiner = Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -70,13 +86,15 @@ def body_frame_masks(layers: BodyLayers, dilate_px: np.ndarray, occluder_px: np.
     return FrameMasks(visible, _occluders(layers, visible, order, occluder_px, static_in_front, True), order)
 
 
-def provided_frame_masks(layers: BodyLayers, visible: np.ndarray, erode_px: np.ndarray,
+def provided_frame_masks(layers: BodyLayers, visible: np.ndarray, erode_px: np.ndarray, reach_px: np.ndarray,
                          occluder_px: np.ndarray) -> FrameMasks:
-    """Occluders for given visible masks [N, H, W]: hidden parts of each projected body."""
+    """Occluders for given visible masks [N, H, W]: hidden parts of each projected body (static scene in
+    front: its interior, eroded by ``erode_px``, where nobody is visible, and the pixels within ``reach_px``
+    of that inside the body where nobody is)."""
     order = [int(k) for k in np.argsort(layers.pelvis_depth, kind="stable")]
     nobody = ~visible.any(0)
-    in_front = np.stack([disk(full, erode_px[p], grow=False) & nobody for p, full in enumerate(layers.full)]) \
-        if len(visible) else None
+    in_front = np.stack([grow_within(disk(full, erode_px[p], grow=False) & nobody, full & nobody, reach_px[p])
+                         for p, full in enumerate(layers.full)]) if len(visible) else None
     return FrameMasks(visible, _occluders(layers, visible, order, occluder_px, in_front, False), order)
 
 

@@ -22,6 +22,7 @@ class MasksConfig:
     static_occluders: bool
     static_max_std: float
     static_erode_m: float
+    static_reach_m: float
     static_motion_min_m: float
     sam_encoder_path: str | None
     sam_decoder_path: str | None

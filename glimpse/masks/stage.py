@@ -26,7 +26,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
-from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, plate_refiner, provided_frame_masks
+from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, grow_within, plate_refiner, provided_frame_masks
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
 from glimpse.masks.plate import Plate, median_plate
@@ -145,11 +145,14 @@ def body_mode_masks(config: MasksConfig, refine_kind: str, layers: BodyLayers, c
     body surface moves [H, W]) for a static camera; image [H, W, 3] for GrabCut or the plate."""
     dilate = _pixels(config.dilate_m, camera, layers, scales)
     erode = _pixels(config.static_erode_m, camera, layers, scales)
+    reach = _pixels(config.static_reach_m, camera, layers, scales)
     in_front = near = None
     if static_evidence is not None and len(layers.pelvis_depth):
         static, moving = static_evidence
-        # static colour means scene (not person) only where the body there, or next to it, moves
-        in_front = np.stack([disk(full, erode[k], grow=False) & static & moving[k]
+        # static colour means scene (not person) only where the body there, or next to it, moves; it is
+        # trusted in the body's interior, and from there reaches the thin parts (feet) the erosion drops
+        in_front = np.stack([grow_within(disk(full, erode[k], grow=False) & static & moving[k],
+                                         full & static & moving[k], reach[k])
                              for k, full in enumerate(layers.full)])
         near = np.stack([static & disk(moving[k] & full, dilate[k]) for k, full in enumerate(layers.full)])
     refine = None
@@ -217,14 +220,16 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
         camera = inputs.cameras[fid]
         present, layers, scales, joints = frames.layers(fid)
         erode = _pixels(config.static_erode_m, camera, layers, scales)
+        reach = _pixels(config.static_reach_m, camera, layers, scales)
         occluder = _pixels(config.occluder_dilate_m, camera, layers, scales)
         if mode == "provided":
             given = np.stack([scene_mask(pid, fid) for pid in present]) if present \
                 else np.zeros((0, scene.height, scene.width), bool)
-            masks = provided_frame_masks(layers, given, erode, occluder)
+            masks = provided_frame_masks(layers, given, erode, reach, occluder)
         elif mode == "onnx-sam":
             image = read_rgb(paths[fid])
-            masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, occluder)
+            masks = provided_frame_masks(layers, sam_masks(sam, image, layers, joints, camera), erode, reach,
+                                         occluder)
         else:
             image = read_rgb(paths[fid]) if refine_kind != "none" else None
             static_evidence = None if moving is None else (static, [moving[pid] for pid in present])

@@ -6,7 +6,7 @@ minimise the graph's Dirichlet energy plus a pull of weight ``anchor_weight`` to
 value per vertex (screened harmonic extension): an unknown vertex takes the weighted mean of its
 neighbours and its anchor, so a colour seen on one side crosses to the mirror side and spreads
 along the surface, while far from anything seen it settles on its anchor (the seen mean of its
-body part, :func:`part_means`).
+body part, or of the nearest ancestor part the views saw, :func:`part_means`).
 """
 
 from __future__ import annotations
@@ -33,15 +33,39 @@ def part_groups(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     return np.minimum(labels, labels[mirror])
 
 
-def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group; the mean
-    over every known vertex for a group with none (zeros when nothing is known)."""
+def part_parents(labels: np.ndarray, groups: np.ndarray, joint_parents: np.ndarray) -> np.ndarray:
+    """[J] for each group (named by its joint index, :func:`part_groups`) the group of its parent part:
+    the groups of the vertices labelled with the nearest ancestor joint that labels any (the most common
+    one); -1 for the root. labels [V] joint per vertex, joint_parents [J] (-1 for the root)."""
+    parent_group = np.full(len(joint_parents), -1)
+    for group in np.unique(groups):
+        parent = int(joint_parents[group])
+        while parent >= 0:
+            members = groups[labels == parent]
+            if len(members):
+                parent_group[group] = int(np.bincount(members).argmax())
+                break
+            parent = int(joint_parents[parent])
+    return parent_group
+
+
+def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray,
+               parent_group: np.ndarray | None = None) -> np.ndarray:
+    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group; for a
+    group with none, that of its nearest ancestor group with some (``parent_group``, :func:`part_parents`:
+    unseen shins take the thighs' colour), else the mean over every known vertex (zeros when nothing is
+    known)."""
     overall = values[known].mean(axis=0) if known.any() else np.zeros(values.shape[1])
+    means = {int(g): values[(groups == g) & known].mean(axis=0) for g in np.unique(groups[known])}
     anchors = np.tile(overall, (len(values), 1))
     for group in np.unique(groups):
-        members = groups == group
-        if (members & known).any():
-            anchors[members] = values[members & known].mean(axis=0)
+        source = int(group)
+        for _ in range(len(parent_group) if parent_group is not None else 0):
+            if source in means or source < 0:
+                break
+            source = int(parent_group[source])
+        if source in means:
+            anchors[groups == group] = means[source]
     return anchors
 
 

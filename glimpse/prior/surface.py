@@ -10,7 +10,8 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
   completed colours are recomputed at most every ``refresh_every`` iterations: the opacity-weighted
   mean colour of the Gaussians of each vertex seen within ``colour_max_angle_deg`` of head-on,
   extended to the rest of the body over the mesh plus left-right mirror edges, pulled with
-  ``part_anchor`` towards the seen mean of the vertex's body part (glimpse.prior.complete).
+  ``part_anchor`` towards the seen mean of the vertex's body part, or of its nearest seen ancestor
+  part (glimpse.prior.complete).
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
@@ -37,7 +38,7 @@ from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
 from glimpse.humans.person import PersonGaussians
 from glimpse.masks.assign import disk
 from glimpse.prior.base import PriorContext, UnseenPrior
-from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means
+from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means, part_parents
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.prior.orbit import sample_orbit_views
 from glimpse.render import Camera, rasterize
@@ -80,7 +81,9 @@ class SurfacePrior(UnseenPrior):
         faces = context.body_model.faces.cpu().numpy()
         mirror, _ = mirror_vertex_map(context.body_model.v_template.double().cpu().numpy())
         self.graph = body_graph(mesh_edges(faces), mirror, config.mirror_weight, context.body_model.num_vertices)
-        self.groups = part_groups(context.body_model.weights.argmax(dim=1).cpu().numpy(), mirror)
+        labels = context.body_model.weights.argmax(dim=1).cpu().numpy()
+        self.groups = part_groups(labels, mirror)
+        self.parent_group = part_parents(labels, self.groups, context.body_model.parents.cpu().numpy())
         min_cosine = math.cos(math.radians(config.colour_max_angle_deg))
         rng = np.random.default_rng(context.seed + VIEW_SEED_OFFSET)
         self.people: dict[str, PersonPrior] = {}
@@ -134,7 +137,8 @@ class SurfacePrior(UnseenPrior):
         mass = torch.zeros(count, device=weights.device).index_add_(0, nearest, weights)
         known = (state.colour_source & (mass > 0)).cpu().numpy()
         mean = (total / mass.clamp(min=1e-12)[:, None]).double().cpu().numpy()
-        filled = harmonic_fill(mean, known, self.graph, part_means(mean, known, self.groups), self.config.part_anchor)
+        anchors = part_means(mean, known, self.groups, self.parent_group)
+        filled = harmonic_fill(mean, known, self.graph, anchors, self.config.part_anchor)
         state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
 
     def state_dict(self) -> dict:
