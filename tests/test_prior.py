@@ -116,6 +116,9 @@ def test_a_part_never_seen_takes_its_nearest_seen_ancestors_colour():
     anchors = part_means(values, known, groups, parents)
     assert anchors[:, 0].tolist() == [1.0, 1.0, 5.0, 5.0, 5.0, 5.0, 5.0, 1.0]  # shin and foot: the thigh's
     assert part_means(values, known, groups)[4:, 0].tolist() == [3.0] * 4  # without parents: the overall mean
+    known[4] = True  # one shin vertex of two is too few at a share of 0.6: the shin still takes the thigh's
+    assert part_means(values, known, groups, parents, min_share=0.6)[4:6, 0].tolist() == [5.0, 5.0]
+    assert part_means(values, known, groups, parents, min_share=0.5)[4:6, 0].tolist() == [0.0, 0.0]
 
 
 def test_an_island_without_known_vertices_takes_the_known_mean():
@@ -150,8 +153,14 @@ def test_a_camera_sees_the_front_not_the_back_and_people_and_occluders_hide(body
                              VISIBILITY)
     assert hidden["p0"].seen.mean() < 0.25 * front.seen.mean() and hidden["p1"].seen.mean() > 0.25
     walled = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE,
-                             {0: np.ones((SIZE, SIZE), bool)}, VISIBILITY)["p0"]
-    assert not walled.seen.any()
+                             {0: {"p0": np.zeros((SIZE, SIZE), bool)}}, VISIBILITY)["p0"]
+    assert not walled.seen.any()  # a mask without the person: a table (or anything) hides it
+    upper = np.zeros((SIZE, SIZE), bool)
+    upper[: SIZE // 2] = True  # image rows above the middle: the person is visible only there
+    half = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {0: {"p0": upper}},
+                           VISIBILITY)["p0"]
+    assert (half.seen <= front.seen).all() and 0.3 < half.seen.sum() / front.seen.sum() < 0.7
+    assert not half.seen[template[:, 1] < template[:, 1].min() + 0.5].any()  # the legs were behind it
 
 
 def test_visibility_files_round_trip(tmp_path):

@@ -4,7 +4,8 @@ A vertex of a person's fitted body counts as seen in a frame when, in that frame
 - it projects inside the image, in front of the camera;
 - it is the nearest surface at its pixel, within ``depth_tolerance_m`` (every person's body is in
   the z-buffer, so people hide each other);
-- a static occluder does not cover its pixel (stage 03's occluder masks outside every person's mask);
+- its pixel is in the person's visible mask (stage 03): a static occluder (a table before the legs)
+  or another person there means the camera saw something else;
 - the camera sees its surface at most ``max_view_angle_deg`` from head-on (grazing views teach little).
 
 Per vertex the record keeps how many frames saw it, the most head-on cosine and the finest
@@ -86,10 +87,11 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.ndarray, camera: PinholeCamera,
-                     width: int, height: int, hidden: np.ndarray, config: VisibilityConfig
+                     width: int, height: int, visible: list[np.ndarray | None], config: VisibilityConfig
                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per body (vertices [V, 3] world, ``scales`` world units per metre): (seen [V] bool, cosine [V] of the
-    viewing angle, px_per_m [V]) in one frame. ``hidden [H, W]`` marks pixels a static occluder covers."""
+    viewing angle, px_per_m [V]) in one frame. ``visible`` per body: the pixels [H, W] bool where that person
+    is visible, or None where no mask is known (the geometry alone decides)."""
     cam = [v @ camera.R.T + camera.t for v in bodies]
     if not cam:
         return []
@@ -97,7 +99,7 @@ def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.nd
     focal = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
     cos_min = math.cos(math.radians(config.max_view_angle_deg))
     result = []
-    for points, scale in zip(cam, scales):
+    for points, scale, mask in zip(cam, scales, visible):
         z = points[:, 2]
         front = z > NEAR
         safe_z = np.where(front, z, 1.0)
@@ -108,7 +110,9 @@ def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.nd
         nearest = z <= raster.depth[vc, uc] + config.depth_tolerance_m * scale
         towards_camera = -points / np.linalg.norm(points, axis=1, keepdims=True).clip(min=NEAR)
         cosine = (vertex_normals(points, faces) * towards_camera).sum(1)
-        seen = inside & nearest & ~hidden[vc, uc] & (cosine >= cos_min)
+        seen = inside & nearest & (cosine >= cos_min)
+        if mask is not None:
+            seen &= mask[vc, uc]
         result.append((seen, cosine, focal * scale / safe_z))
     return result
 
@@ -122,21 +126,20 @@ def posed_vertices(body_model: BodyModel, params: BodyParams) -> np.ndarray:
 
 
 def body_visibility(body_model: BodyModel, bodies: dict[str, BodyParams], cameras: dict[int, PinholeCamera],
-                    width: int, height: int, hidden: dict[int, np.ndarray], config: VisibilityConfig
+                    width: int, height: int, visible: dict[int, dict[str, np.ndarray]], config: VisibilityConfig
                     ) -> dict[str, BodyVisibility]:
-    """Every person's vertex visibility over the frames with a camera; ``hidden`` per frame id [H, W]
-    (frames without an entry have no static occluder)."""
+    """Every person's vertex visibility over the frames with a camera; ``visible[frame id][pid]`` [H, W] bool:
+    where that person is visible in that frame (stage 03's masks; no entry: no mask, geometry alone)."""
     faces = body_model.faces.numpy()
     vertex_count = body_model.num_vertices
     records = {pid: BodyVisibility.empty(vertex_count) for pid in bodies}
     posed = {pid: (posed_vertices(body_model, params), {int(f): r for r, f in enumerate(params.frame_ids)})
              for pid, params in bodies.items()}
-    nothing_hidden = np.zeros((height, width), bool)
     for fid in sorted(cameras):
         present = [pid for pid in sorted(bodies) if fid in posed[pid][1]]
         seen = frame_visibility([posed[pid][0][posed[pid][1][fid]] for pid in present],
                                 [float(bodies[pid].scale) for pid in present], faces, cameras[fid], width, height,
-                                hidden.get(fid, nothing_hidden), config)
+                                [visible.get(fid, {}).get(pid) for pid in present], config)
         for pid, (mask, cosine, px_per_m) in zip(present, seen):
             records[pid].add(mask, cosine, px_per_m)
     return records

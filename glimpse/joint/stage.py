@@ -88,6 +88,15 @@ def load_views(inputs: JointInputs, config: JointConfig, device: torch.device) -
     return views
 
 
+def person_masks(inputs: JointInputs, pids: list[str]) -> dict[int, dict[str, np.ndarray]]:
+    """Per frame with a camera, per person with a mask file there: stage 03's visible mask [H, W] bool."""
+    masks: dict[int, dict[str, np.ndarray]] = {}
+    for fid in sorted(inputs.cameras):
+        paths = {pid: inputs.masks_dir / pid / f"{frame_name(fid)}.png" for pid in pids}
+        masks[fid] = {pid: read_mask(path) for pid, path in paths.items() if path.is_file()}
+    return masks
+
+
 def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, body_model: BodyModel,
                    sh_degree: int, device: torch.device) -> list[PersonGaussians]:
     """One PersonGaussians per person with a body in some frame with a camera, in pid order."""
@@ -110,9 +119,8 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     torch.manual_seed(seed)
     views = load_views(inputs, config, device)
     people = initial_people(inputs, config, body, body_model, render.sh_degree, device)
-    hidden = {view.frame_id: ~view.keep.cpu().numpy() for view in views}
     visibility = body_visibility(body_model, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
-                                 inputs.height, hidden, config.visibility)
+                                 inputs.height, person_masks(inputs, [p.pid for p in people]), config.visibility)
     prior = make_prior(prior_kind, PriorContext(people, visibility, body_model, render, seed, config.scaled),
                        prior_settings)
     initial_counts = {p.pid: len(p.model) for p in people}

@@ -50,13 +50,17 @@ def part_parents(labels: np.ndarray, groups: np.ndarray, joint_parents: np.ndarr
 
 
 def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray,
-               parent_group: np.ndarray | None = None) -> np.ndarray:
-    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group; for a
-    group with none, that of its nearest ancestor group with some (``parent_group``, :func:`part_parents`:
-    unseen shins take the thighs' colour), else the mean over every known vertex (zeros when nothing is
-    known)."""
+               parent_group: np.ndarray | None = None, min_share: float = 0.0) -> np.ndarray:
+    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group, if at least
+    ``min_share`` of the group's vertices are known (a few stray vertices are not a part's colour); else that
+    of its nearest ancestor group that qualifies (``parent_group``, :func:`part_parents`: unseen shins take the
+    thighs' colour), else the mean over every known vertex (zeros when nothing is known)."""
     overall = values[known].mean(axis=0) if known.any() else np.zeros(values.shape[1])
-    means = {int(g): values[(groups == g) & known].mean(axis=0) for g in np.unique(groups[known])}
+    means = {}
+    for group in np.unique(groups[known]):
+        members = groups == group
+        if (members & known).sum() >= min_share * members.sum():
+            means[int(group)] = values[members & known].mean(axis=0)
     anchors = np.tile(overall, (len(values), 1))
     for group in np.unique(groups):
         source = int(group)

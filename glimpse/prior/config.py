@@ -24,6 +24,7 @@ class SurfacePriorConfig:
     refresh_every: int
     mirror_weight: float
     part_anchor: float
+    part_min_seen: float
     colour_max_angle_deg: float
     colour: float
     view_dependent: float

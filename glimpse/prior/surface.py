@@ -137,7 +137,7 @@ class SurfacePrior(UnseenPrior):
         mass = torch.zeros(count, device=weights.device).index_add_(0, nearest, weights)
         known = (state.colour_source & (mass > 0)).cpu().numpy()
         mean = (total / mass.clamp(min=1e-12)[:, None]).double().cpu().numpy()
-        anchors = part_means(mean, known, self.groups, self.parent_group)
+        anchors = part_means(mean, known, self.groups, self.parent_group, self.config.part_min_seen)
         filled = harmonic_fill(mean, known, self.graph, anchors, self.config.part_anchor)
         state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
 
