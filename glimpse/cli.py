@@ -4,6 +4,10 @@
   glimpse prepare --scene S --out O      validate, resolve parameters, write .params/.inputs; print the run folder
   glimpse params --scene S --stage X     print the resolved parameters one stage reads
   glimpse run-dir --scene S --out O      print OUT/<scene name> without preparing
+  glimpse export RUN [--frame T] [--out DIR] [--sh-degree D]
+                                         a finished run's scene at frame T as one 3DGS PLY, each person's
+                                         canonical and posed PLYs with body and skinning, the cameras as
+                                         COLMAP text (docs/exports.md)
 """
 
 from __future__ import annotations
@@ -33,6 +37,12 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
         if name == "params":
             p.add_argument("--stage", required=True)
+    p_export = sub.add_parser("export", help="a finished run's Gaussians and cameras for other tools")
+    p_export.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
+    p_export.add_argument("--frame", type=int, default=None, help="input frame id (default: the middle one)")
+    p_export.add_argument("--out", type=Path, default=None, help="default: RUN/export")
+    p_export.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
+                          help="SH degree of the posed PLYs (default: as trained; 3 for INRIA's SIBR viewer)")
     args = parser.parse_args(argv)
     try:
         return _dispatch(args)
@@ -54,6 +64,14 @@ def _dispatch(args: argparse.Namespace) -> int:
         if violations:
             raise SceneError(str(args.scene), violations)
         print(f"{args.scene}: valid glimpse-scene/1")
+        return 0
+    if args.command == "export":
+        from glimpse.export.run import default_frame, export_run, load_finished_run
+
+        run = load_finished_run(args.run)
+        frame = default_frame(run) if args.frame is None else args.frame
+        out = export_run(run, frame, args.out or args.run / "export", args.sh_degree)
+        print(f"exported frame {frame} of {args.run} to {out}/ (docs/exports.md says which viewers open what)")
         return 0
     if args.command == "run-dir":
         print(args.out / scene_name(args.scene))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from glimpse.background.stage import render_camera
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.lbs import batch_rodrigues
 from glimpse.body.model import BodyModel
@@ -201,6 +202,39 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
     assert "Humans only" in text and "union of the people's masks" in text and "none of whose vertices" in text
     out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input")
     assert "INPUT view" in read_json(out / "metrics.json")["views"]
+
+
+def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_path, capsys):
+    from glimpse.cli import main as cli
+    from glimpse.export.run import load_finished_run
+    import pycolmap
+
+    from glimpse.joint.compose import frame_gaussians, render_frame
+    from glimpse.render import rasterize
+
+    _, run_dir = tiny
+    assert cli(["export", str(run_dir), "--frame", "3", "--out", str(tmp_path / "export")]) == 0
+    doc = read_json(tmp_path / "export" / "export.json")
+    assert doc["frame"] == 3 and set(doc["people"]) == {"p0", "p1"}
+    finished = load_finished_run(run_dir)
+    camera = render_camera(finished.cameras[3], finished.width, finished.height, torch.device("cpu"))
+    with torch.no_grad():
+        gaussians = frame_gaussians(camera, 3, finished.people, RENDER.sh_degree, finished.background, RENDER.sh_degree)
+        expected = render_frame(camera, gaussians, len(finished.people), RENDER).rgb
+        scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "export" / doc["scene"])[0])
+        exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree)).rgb
+    assert len(scene) == len(gaussians.means) and (exported - expected).abs().max() < 1e-4
+    for pid in ("p0", "p1"):
+        assert "posed_000003.ply" in doc["people"][pid]["files"]
+        canonical, _ = read_gaussians_ply(tmp_path / "export" / "people" / pid / "canonical.ply")
+        assert len(canonical) == doc["people"][pid]["gaussians"]
+    model = pycolmap.Reconstruction(str(tmp_path / "export" / "cameras"))  # COLMAP's own reader
+    assert len(model.images) == len(finished.cameras)
+    image = next(i for i in model.images.values() if i.name == "000003.png")
+    assert np.allclose(image.cam_from_world().rotation.matrix(), finished.cameras[3].R, atol=1e-6)
+    assert model.cameras[image.camera_id].width == finished.width
+    assert cli(["export", str(tmp_path / "nothing")]) == 2
+    assert "no finished stage 06" in capsys.readouterr().err
 
 
 def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):

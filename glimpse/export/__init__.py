@@ -1,0 +1,1 @@
+"""Exports for users' tools: standard 3DGS PLYs of posed people and whole frames (docs/exports.md)."""
