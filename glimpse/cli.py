@@ -8,6 +8,9 @@
                                          a finished run's scene at frame T as one 3DGS PLY, each person's
                                          canonical and posed PLYs with body and skinning, the cameras as
                                          COLMAP text (docs/exports.md)
+  glimpse render RUN [--camera input|orbit[:DEG]|heldout:NAME|json:FILE|colmap:DIR] [--time T|A:B|all]
+                 [--remove p1,p2] [--no-background] [--scene SCENE] [--out video.mp4]
+                                         a finished run from any camera at any time (docs/renders.md)
 """
 
 from __future__ import annotations
@@ -43,6 +46,18 @@ def main(argv: list[str] | None = None) -> int:
     p_export.add_argument("--out", type=Path, default=None, help="default: RUN/export")
     p_export.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
                           help="SH degree of the posed PLYs (default: as trained; 3 for INRIA's SIBR viewer)")
+    p_render = sub.add_parser("render", help="render a finished run along a camera path (docs/renders.md)")
+    p_render.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
+    p_render.add_argument("--camera", default="input", help="input | orbit[:DEGREES] | heldout:NAME | json:FILE | "
+                                                             "colmap:FOLDER (default: input)")
+    p_render.add_argument("--time", default="all", help="T | A:B | all (input frame ids; default: all)")
+    p_render.add_argument("--remove", default="", help="people to leave out, comma-separated pids")
+    p_render.add_argument("--no-background", action="store_true", help="the people alone, on black")
+    p_render.add_argument("--scene", type=Path, default=None, help="the run's scene (for heldout cameras)")
+    p_render.add_argument("--orbit-frames", type=int, default=120, help="frames of an orbit at one time")
+    p_render.add_argument("--fps", type=float, default=25.0, help="frames per second of the video")
+    p_render.add_argument("--out", type=Path, default=None, help="an .mp4, or a folder for PNG frames "
+                                                                 "(default: RUN/renders/render.mp4)")
     args = parser.parse_args(argv)
     try:
         return _dispatch(args)
@@ -66,12 +81,20 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(f"{args.scene}: valid glimpse-scene/1")
         return 0
     if args.command == "export":
-        from glimpse.export.run import default_frame, export_run, load_finished_run
+        from glimpse.export.run import export_run
+        from glimpse.replay.finished import default_frame, load_finished_run
 
         run = load_finished_run(args.run)
         frame = default_frame(run) if args.frame is None else args.frame
         out = export_run(run, frame, args.out or args.run / "export", args.sh_degree)
         print(f"exported frame {frame} of {args.run} to {out}/ (docs/exports.md says which viewers open what)")
+        return 0
+    if args.command == "render":
+        from glimpse.replay.video import render_command
+
+        out = render_command(args.run, args.camera, args.time, args.remove, not args.no_background, args.scene,
+                             args.orbit_frames, args.fps, args.out or args.run / "renders" / "render.mp4")
+        print(f"rendered {out}")
         return 0
     if args.command == "run-dir":
         print(args.out / scene_name(args.scene))

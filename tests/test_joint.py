@@ -206,7 +206,7 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
 
 def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_path, capsys):
     from glimpse.cli import main as cli
-    from glimpse.export.run import load_finished_run
+    from glimpse.replay.finished import load_finished_run
     import pycolmap
 
     from glimpse.joint.compose import frame_gaussians, render_frame
@@ -235,6 +235,36 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
     assert model.cameras[image.camera_id].width == finished.width
     assert cli(["export", str(tmp_path / "nothing")]) == 2
     assert "no finished stage 06" in capsys.readouterr().err
+
+
+def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_path, capsys):
+    from glimpse.cli import main as cli
+    from glimpse.io.video import read_mp4
+    from glimpse.replay.cameras import Shot
+    from glimpse.replay.finished import load_finished_run
+    from glimpse.replay.render import Edits, render_shot
+
+    scene, run_dir = tiny
+    assert cli(["render", str(run_dir), "--time", "0:3", "--out", str(tmp_path / "input.mp4")]) == 0
+    assert len(read_mp4(tmp_path / "input.mp4")) == 4
+    assert cli(["render", str(run_dir), "--camera", "orbit:90", "--time", "2", "--orbit-frames", "3",
+                "--out", str(tmp_path / "orbit")]) == 0
+    assert len(list((tmp_path / "orbit").glob("*.png"))) == 3
+    assert cli(["render", str(run_dir), "--camera", "heldout:cam00", "--scene", str(scene), "--time", "2",
+                "--out", str(tmp_path / "held")]) == 0
+    assert len(list((tmp_path / "held").glob("*.png"))) == 1
+    assert cli(["render", str(run_dir), "--remove", "p9"]) == 2 and "the run's people are p0, p1" in capsys.readouterr().err
+
+    finished = load_finished_run(run_dir)
+    shot, cpu = Shot(finished.cameras[3], finished.width, finished.height), torch.device("cpu")
+    full = render_shot(finished, shot, 3, Edits(), cpu).astype(int)
+    without_p1 = render_shot(finished, shot, 3, Edits(frozenset({"p1"})), cpu).astype(int)
+    p1_alone = render_shot(finished, shot, 3, Edits(frozenset({"p0"}), background=False), cpu).max(-1) > 0
+    p0_alone = render_shot(finished, shot, 3, Edits(frozenset({"p1"}), background=False), cpu).max(-1) > 0
+    assert p1_alone.sum() > 20
+    changed = np.abs(full - without_p1).max(-1) > 10
+    assert changed[p1_alone & ~p0_alone].mean() > 0.5  # where p1 was, the background (or p0) shows now
+    assert not changed[~p1_alone].any()  # nothing else moves
 
 
 def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):

@@ -14,63 +14,17 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass
 from pathlib import Path
 
-from glimpse.body.config import BodyConfig, resolve_model_path
-from glimpse.body.model import BodyModel
-from glimpse.cameras.model import PinholeCamera
-from glimpse.config import config_from_mapping
 from glimpse.errors import GlimpseError
 from glimpse.export.splats import frame_splats, posed_person_splats, with_sh_degree
-from glimpse.gaussians.model import GaussianModel
-from glimpse.gaussians.ply import GaussianSplats, read_gaussians_ply, write_gaussians_ply
-from glimpse.humans.load import load_trained_people
-from glimpse.humans.person import PersonGaussians
-from glimpse.io.cameras_json import read_cameras_json
+from glimpse.gaussians.ply import GaussianSplats, write_gaussians_ply
 from glimpse.io.colmap_text import write_colmap_text
 from glimpse.io.images import frame_name
+from glimpse.replay.finished import FinishedRun
 
 EXPORT_FORMAT = "glimpse-export/1"
 PERSON_FILES = ("canonical.ply", "body.npz", "skinning.npz")
-
-
-@dataclass
-class FinishedRun:
-    """What stages 01 and 06 left in a run folder: cameras, background and people."""
-
-    folder: Path
-    width: int
-    height: int
-    cameras: dict[int, PinholeCamera]
-    background: GaussianModel
-    people: list[PersonGaussians]
-    body_model: BodyModel
-
-
-def load_finished_run(folder: Path) -> FinishedRun:
-    """Read ``folder`` (OUT/<scene>); one clear error when stage 06 has not finished there."""
-    joint, sfm = folder / "06_joint_opt", folder / "01_sfm"
-    if not (joint / "manifest.json").is_file():
-        raise GlimpseError(f"{folder}: no finished stage 06 (no {joint / 'manifest.json'}); run "
-                           f"`make all SCENE=...` (or `make 06_joint_opt`) first")
-    params_file = folder / ".params" / "06_joint_opt.json"
-    if not params_file.is_file():
-        raise GlimpseError(f"{params_file}: missing; the run folder is incomplete (rerun stage 06)")
-    body = config_from_mapping(BodyConfig, json.loads(params_file.read_text())["params"]["body"], "body")
-    body_model = BodyModel.from_file(resolve_model_path(body))
-    width, height, cameras = read_cameras_json(sfm / "cameras.json")
-    background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0])
-    return FinishedRun(folder, width, height, cameras, background,
-                       load_trained_people(joint / "humans", body_model), body_model)
-
-
-def default_frame(run: FinishedRun) -> int:
-    """The middle input frame with a camera."""
-    frames = sorted(run.cameras)
-    if not frames:
-        raise GlimpseError(f"{run.folder / '01_sfm' / 'cameras.json'}: no camera, no frame to export")
-    return frames[len(frames) // 2]
 
 
 def _degree(splats: GaussianSplats, sh_degree: int | None) -> GaussianSplats:

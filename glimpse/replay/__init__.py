@@ -1,0 +1,1 @@
+"""Rendering a finished run from any camera at any time, with people removed (docs/renders.md)."""

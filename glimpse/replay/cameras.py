@@ -1,0 +1,90 @@
+"""Camera paths for rendering a finished run: the input cameras, an orbit, a held-out camera, or a
+list from a COLMAP text model or a Glimpse cameras.json (docs/renders.md).
+
+An orbit turns a starting camera about the vertical axis through a centre point (the people's
+mean pelvis at the chosen time): the camera keeps its height, distance and tilt relative to the
+people. "Vertical" is the mean camera up vector of the input cameras (CONTRACTS.md "Up": no stage
+assumes the world's up axis).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from glimpse.cameras.model import PinholeCamera
+from glimpse.errors import GlimpseError
+from glimpse.io.cameras_json import read_cameras_json
+from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
+
+PINHOLE_MODELS = ("SIMPLE_PINHOLE", "PINHOLE")  # COLMAP params: (f, cx, cy) and (fx, fy, cx, cy)
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One camera of a path and its image size in pixels."""
+
+    camera: PinholeCamera
+    width: int
+    height: int
+
+
+def mean_up(cameras: list[PinholeCamera]) -> np.ndarray:
+    """(3,) unit world vector: the mean of the cameras' up directions (OpenCV cameras: -y)."""
+    up = -np.mean([camera.R[1] for camera in cameras], axis=0)
+    norm = np.linalg.norm(up)
+    if norm < 1e-9:
+        raise GlimpseError("the input cameras' up vectors cancel out: no vertical axis for an orbit")
+    return up / norm
+
+
+def turned(camera: PinholeCamera, centre: np.ndarray, axis: np.ndarray, degrees: float) -> PinholeCamera:
+    """``camera`` carried ``degrees`` about the line through ``centre`` along ``axis`` (right-handed): the
+    world seen by the new camera is the old one's turned back by the same angle."""
+    turn = Rotation.from_rotvec(np.radians(degrees) * axis).as_matrix()
+    R = camera.R @ turn.T
+    return PinholeCamera(camera.K.copy(), R, camera.t + camera.R @ centre - R @ centre)
+
+
+def orbit_path(start: PinholeCamera, width: int, height: int, centre: np.ndarray, axis: np.ndarray, count: int,
+               degrees: float = 360.0) -> list[Shot]:
+    """``count`` shots turning ``start`` by ``degrees`` in all about the axis through ``centre`` (the last
+    shot stops one step short of a full circle, so a looped video does not repeat a frame)."""
+    if count < 1:
+        raise GlimpseError(f"an orbit needs at least one frame, got {count}")
+    step = degrees / count if math.isclose(abs(degrees), 360.0) else degrees / max(count - 1, 1)
+    return [Shot(turned(start, centre, axis, k * step), width, height) for k in range(count)]
+
+
+def json_path(path: Path) -> list[Shot]:
+    """Every camera of a Glimpse cameras.json (stage 01's format), in frame order."""
+    width, height, cameras = read_cameras_json(path)
+    return [Shot(cameras[fid], width, height) for fid in sorted(cameras)]
+
+
+def colmap_path(folder: Path) -> list[Shot]:
+    """Every image of a COLMAP model (text or binary), in name order; pinhole camera models only."""
+    import pycolmap
+
+    if not folder.is_dir():
+        raise GlimpseError(f"{folder}: no COLMAP model folder (cameras.txt/images.txt or .bin)")
+    model = pycolmap.Reconstruction(str(folder))
+    shots = []
+    for image in sorted(model.images.values(), key=lambda i: i.name):
+        camera = model.cameras[image.camera_id]
+        if camera.model.name not in PINHOLE_MODELS:
+            raise GlimpseError(f"{folder}: camera {image.camera_id} is {camera.model.name}; only "
+                               f"{' and '.join(PINHOLE_MODELS)} can be rendered (undistort the model first)")
+        params = list(camera.params)
+        fx, fy, cx, cy = (params[0], *params) if camera.model.name == "SIMPLE_PINHOLE" else params
+        K = np.array([[fx, 0.0, cx - COLMAP_PIXEL_OFFSET], [0.0, fy, cy - COLMAP_PIXEL_OFFSET], [0.0, 0.0, 1.0]])
+        pose = image.cam_from_world()
+        shots.append(Shot(PinholeCamera(K, pose.rotation.matrix(), np.asarray(pose.translation)),
+                          camera.width, camera.height))
+    if not shots:
+        raise GlimpseError(f"{folder}: the COLMAP model has no image")
+    return shots
