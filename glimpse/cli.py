@@ -9,7 +9,7 @@
                                          canonical and posed PLYs with body and skinning, the cameras as
                                          COLMAP text (docs/exports.md)
   glimpse render RUN [--camera input|orbit[:DEG]|heldout:NAME|json:FILE|colmap:DIR] [--time T|A:B|all]
-                 [--remove p1,p2] [--no-background] [--scene SCENE] [--out video.mp4]
+                 [--remove p1,p2] [--motion p0=walk.npz] [--no-background] [--scene SCENE] [--out video.mp4]
                                          a finished run from any camera at any time (docs/renders.md)
 """
 
@@ -55,6 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     p_render.add_argument("--no-background", action="store_true", help="the people alone, on black")
     p_render.add_argument("--scene", type=Path, default=None, help="the run's scene (for heldout cameras)")
     p_render.add_argument("--orbit-frames", type=int, default=120, help="frames of an orbit at one time")
+    p_render.add_argument("--motion", action="append", default=[], metavar="PID=FILE|PID=builtin:NAME",
+                          help="drive a person by a motion (.npz AMASS-style or smplx-style, or a built-in: walk, "
+                               "turn, wave, side_step_dance) from their place at the first time; repeatable")
+    p_render.add_argument("--motion-seconds", type=float, default=4.0, help="length of a built-in motion")
     p_render.add_argument("--fps", type=float, default=25.0, help="frames per second of the video")
     p_render.add_argument("--out", type=Path, default=None, help="an .mp4, or a folder for PNG frames "
                                                                  "(default: RUN/renders/render.mp4)")
@@ -93,7 +97,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from glimpse.replay.video import render_command
 
         out = render_command(args.run, args.camera, args.time, args.remove, not args.no_background, args.scene,
-                             args.orbit_frames, args.fps, args.out or args.run / "renders" / "render.mp4")
+                             args.orbit_frames, args.fps, args.out or args.run / "renders" / "render.mp4",
+                             args.motion, args.motion_seconds)
         print(f"rendered {out}")
         return 0
     if args.command == "run-dir":

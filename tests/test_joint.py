@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 from glimpse.background.stage import render_camera
 from glimpse.body.config import BodyConfig, resolve_model_path
@@ -254,6 +255,10 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
                 "--out", str(tmp_path / "held")]) == 0
     assert len(list((tmp_path / "held").glob("*.png"))) == 1
     assert cli(["render", str(run_dir), "--remove", "p9"]) == 2 and "the run's people are p0, p1" in capsys.readouterr().err
+    assert cli(["render", str(run_dir), "--time", "1", "--motion", "p0=builtin:walk", "--motion-seconds", "0.3",
+                "--fps", "10", "--out", str(tmp_path / "walk")]) == 0  # a frozen scene, p0 walks 3 frames
+    walked = [np.asarray(Image.open(f)).astype(int) for f in sorted((tmp_path / "walk").glob("*.png"))]
+    assert len(walked) == 3 and np.abs(walked[2] - walked[0]).max() > 50
 
     finished = load_finished_run(run_dir)
     shot, cpu = Shot(finished.cameras[3], finished.width, finished.height), torch.device("cpu")

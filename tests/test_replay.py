@@ -5,12 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
+from glimpse.body.config import BodyConfig, resolve_model_path
+from glimpse.body.model import BodyModel
+from glimpse.body.motion import BodySequence, builtin_motion
+from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
+from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import GlimpseError
 from glimpse.io.cameras_json import write_cameras_json
 from glimpse.io.colmap_text import write_colmap_text
 from glimpse.replay.cameras import Shot, colmap_path, json_path, mean_up, orbit_path, turned
+from glimpse.replay.motion import Z_UP_TO_Y_UP, retarget
 from glimpse.replay.render import pair_shots_and_times
 
 K = np.array([[100.0, 0.0, 63.5], [0.0, 100.0, 47.5], [0.0, 0.0, 1.0]])
@@ -70,3 +77,40 @@ def test_one_camera_holds_still_one_time_freezes_and_otherwise_both_advance():
     assert pair_shots_and_times([a, b], [1, 2]) == [(a, 1), (b, 2)]
     with pytest.raises(GlimpseError, match="2 cameras and 3 times"):
         pair_shots_and_times([a, b], [1, 2, 3])
+
+
+def _standing(scale: float = 1.0) -> BodyParams:
+    """A person in a static camera's frame (y down), upright, facing the camera (-z), 3 m ahead."""
+    frames = 4
+    return BodyParams(np.arange(frames), np.zeros(10), np.tile([np.pi, 0.0, 0.0], (frames, 1)),
+                      np.zeros((frames, 69)), np.tile([0.2, 0.5, 3.0], (frames, 1)), scale, "free",
+                      np.zeros(frames, bool))
+
+
+def test_a_new_motion_starts_where_the_person_stands_and_heads_their_way():
+    body_model = BodyModel.from_file(resolve_model_path(config_from_mapping(
+        BodyConfig, load_pipeline_yaml()["body"], "body")))
+    walk = builtin_motion("walk", 30, 30.0)  # forward (+z canonical) at 1.2 m/s
+    for scale in (1.0, 2.0):
+        person = _standing(scale)
+        moved = retarget(walk, person, 2, body_model, np.arange(40))
+        pelvis = lambda params, row: body_model(params.betas, params.global_orient[row:row + 1],  # noqa: E731
+                                                params.body_pose[row:row + 1], params.transl[row:row + 1],
+                                                scale=params.scale).joints[0, 0].double().numpy()
+        start, there = pelvis(person, 2), pelvis(moved, 0)
+        assert np.allclose(there[[0, 2]], start[[0, 2]], atol=1e-6)  # on the spot, on the ground (y down)
+        assert abs(there[1] - start[1]) < 0.05 * scale
+        step = pelvis(moved, 29) - there  # a second later: 1.2 m towards the camera (the person's forward, -z)
+        assert np.isclose(step[2], -1.2 * 29 / 30 * scale, atol=0.02 * scale) and abs(step[0]) < 0.02 * scale
+        assert np.allclose(moved.transl[29], moved.transl[39])  # the motion's last frame is held
+        assert np.allclose(moved.body_pose[:30], walk.body_pose)  # the joints move as the motion says
+    # the same motion stored z up (AMASS) lands identically
+    stored = BodySequence(walk.betas, (Z_UP_TO_Y_UP.inv() * Rotation.from_rotvec(walk.global_orient)).as_rotvec(),
+                          walk.body_pose, Z_UP_TO_Y_UP.inv().apply(walk.transl), walk.fps, "z", "test")
+    z_up = retarget(stored, _standing(), 2, body_model, np.arange(30))
+    y_up = retarget(walk, _standing(), 2, body_model, np.arange(30))
+    assert np.allclose(z_up.transl, y_up.transl, atol=1e-6) and np.allclose(
+        Rotation.from_rotvec(z_up.global_orient).as_matrix(), Rotation.from_rotvec(y_up.global_orient).as_matrix(),
+        atol=1e-9)
+    with pytest.raises(GlimpseError, match="no body at frame 9"):
+        retarget(walk, _standing(), 9, body_model, np.arange(3))

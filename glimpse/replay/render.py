@@ -1,34 +1,41 @@
-"""Rendering a finished run along a camera path over a span of time, optionally without some people
-or without the background (docs/renders.md)."""
+"""Rendering a finished run along a camera path over a span of time, optionally without some people,
+without the background, or with people driven by a new motion (docs/renders.md)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
 from glimpse.background.stage import render_camera
+from glimpse.body.params import BodyParams
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians, joint_transforms
-from glimpse.joint.compose import frame_gaussians, render_frame
+from glimpse.joint.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.replay.cameras import Shot
 from glimpse.replay.finished import FinishedRun
 
 
 @dataclass(frozen=True)
 class Edits:
-    """What to change in the scene: people to leave out, and whether to draw the background."""
+    """What to change in the scene: people to leave out, whether to draw the background, and people driven
+    by a new motion (pid -> body parameters whose frame ids are the video's frame indices, replay.motion)."""
 
     removed: frozenset[str] = frozenset()
     background: bool = True
+    driven: dict[str, BodyParams] = field(default_factory=dict)
 
     def check(self, run: FinishedRun) -> None:
         unknown = sorted(self.removed - {p.pid for p in run.people})
         if unknown:
             known = ", ".join(p.pid for p in run.people) or "nobody"
             raise GlimpseError(f"cannot remove {', '.join(unknown)}: the run's people are {known}")
+        unknown = sorted(set(self.driven) - {p.pid for p in run.people})
+        if unknown:
+            raise GlimpseError(f"cannot drive {', '.join(unknown)}: the run's people are "
+                               f"{', '.join(p.pid for p in run.people) or 'nobody'}")
 
 
 def pelvis(person: PersonGaussians, frame_id: int) -> np.ndarray:
@@ -65,20 +72,43 @@ def pair_shots_and_times(shots: Sequence[Shot], times: Sequence[int]) -> list[tu
     return list(zip(shots, times))
 
 
+def driven_people(run: FinishedRun, edits: Edits) -> list[PersonGaussians]:
+    """The people of ``edits.driven``: their Gaussians and skinning, posed by the new body parameters."""
+    return [PersonGaussians(p.pid, p.model, p.grid, p.rig, edits.driven[p.pid]) for p in run.people
+            if p.pid in edits.driven and p.pid not in edits.removed]
+
+
+def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) -> FrameGaussians:
+    """Both sets of Gaussians in one; the second's people numbered after the first's ``first_people``."""
+    offset = len(first.means)
+    rows = dict(first.rows)
+    rows.update({first_people + k: slice(r.start + offset, r.stop + offset) for k, r in second.rows.items()})
+    groups = torch.where(second.groups > BACKGROUND_GROUP, second.groups + first_people, second.groups)
+    return FrameGaussians(*(torch.cat([getattr(first, name), getattr(second, name)])
+                            for name in ("means", "covariances", "opacities", "colors")),
+                          torch.cat([first.groups, groups]), rows)
+
+
 @torch.no_grad()
-def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, device: torch.device) -> np.ndarray:
-    """[H, W, 3] uint8: the scene at ``frame_id`` from ``shot`` (black where nothing is drawn)."""
+def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, device: torch.device,
+                video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
+    """[H, W, 3] uint8: the scene at ``frame_id`` from ``shot`` (black where nothing is drawn), the ``driven``
+    people (driven_people) at their motion's ``video_index``."""
     camera = render_camera(shot.camera, shot.width, shot.height, device)
-    people = [p for p in run.people if p.pid not in edits.removed]
+    people = [p for p in run.people if p.pid not in edits.removed and p.pid not in edits.driven]
     background = run.background if edits.background else None
-    gaussians = frame_gaussians(camera, frame_id, people, run.render.sh_degree, background, run.render.sh_degree)
-    rgb = render_frame(camera, gaussians, len(people), run.render, torch.zeros(3, device=device)).rgb
+    degree = run.render.sh_degree
+    gaussians = frame_gaussians(camera, frame_id, people, degree, background, degree)
+    if driven:
+        gaussians = _joined(gaussians, frame_gaussians(camera, video_index, driven, degree), len(people))
+    rgb = render_frame(camera, gaussians, len(people) + len(driven), run.render, torch.zeros(3, device=device)).rgb
     return (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
 def render_video(run: FinishedRun, frames: Sequence[tuple[Shot, int]], edits: Edits, device: torch.device
                  ) -> Iterator[np.ndarray]:
-    """The frames of a video, one render per (shot, frame id)."""
+    """The frames of a video, one render per (shot, frame id); driven people follow the video's index."""
     edits.check(run)
-    for shot, frame_id in frames:
-        yield render_shot(run, shot, frame_id, edits, device)
+    driven = driven_people(run, edits)
+    for index, (shot, frame_id) in enumerate(frames):
+        yield render_shot(run, shot, frame_id, edits, device, index, driven)
