@@ -19,6 +19,7 @@ from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams, read_body_params
 from glimpse.cameras.model import PinholeCamera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.io.cameras_json import read_cameras_json
 from glimpse.errors import ConfigError
 from glimpse.eval.never_seen import PosedBodies
 from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
@@ -137,7 +138,9 @@ def test_priors_are_chosen_by_name_and_unknown_ones_are_listed():
 
 # --- the stages on the tiny demo ------------------------------------------------------------------------
 
-SHORT = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.02"  # 300 and 240 iterations
+SHORT = ("04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.02 "  # 300 and 240 iterations
+         "07_eval.renders.orbit_frames=6 07_eval.renders.turntable_frames=4 07_eval.renders.turntable_size_px=48 "
+         "07_eval.renders.motion_seconds=2 07_eval.renders.time=1")  # short videos, from frame 1 (p0 in view)
 
 
 @pytest.fixture(scope="module")
@@ -189,6 +192,27 @@ def test_training_beats_the_untrained_bodies_on_held_out_views(tiny, body_model)
     assert trained["psnr"] > baseline.psnr + 1.0
 
 
+def test_stage07_writes_the_standard_videos(tiny):
+    from glimpse.io.video import read_mp4
+
+    scene, run_dir = tiny
+    renders = run_dir / "07_eval" / "renders"
+    manifest = read_json(run_dir / "07_eval" / "manifest.json")
+    frames = sorted(read_cameras_json(run_dir / "01_sfm" / "cameras.json")[2])
+    fps = load_scene(scene).fps
+    expected = {"input.mp4": len(frames), "orbit.mp4": len(frames), "freeze.mp4": 6, "person_p0.mp4": 4,
+                "person_p1.mp4": 4, "removed_p0.mp4": len(frames), "motion_p0.mp4": round(2 * fps)}
+    expected.update({f"heldout_{name}.mp4": len(cam.images) for name, cam in load_scene(scene).eval_cameras.items()})
+    assert set(manifest["summary"]["renders"]) == set(expected)
+    for name, count in expected.items():
+        video = read_mp4(renders / name)
+        assert len(video) == count, name
+    width = read_cameras_json(run_dir / "01_sfm" / "cameras.json")[0]
+    assert read_mp4(renders / "input.mp4").shape[2] >= 2 * width  # render beside the input frame
+    moved = read_mp4(renders / "motion_p0.mp4").astype(int)
+    assert np.abs(moved[-1] - moved[0]).max() > 50  # the driven person walked
+
+
 def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):
     scene, run_dir = tiny
     metrics = read_json(run_dir / "07_eval" / "metrics.json")
@@ -201,7 +225,7 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
     assert metrics["tables"]["never_seen"]["rows"][0]["psnr"] > metrics["tables"]["never_seen"]["rows"][1]["psnr"]
     text = (run_dir / "07_eval" / "metrics.md").read_text()
     assert "Humans only" in text and "union of the people's masks" in text and "none of whose vertices" in text
-    out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input")
+    out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input 07_eval.renders.enabled=false")
     assert "INPUT view" in read_json(out / "metrics.json")["views"]
 
 

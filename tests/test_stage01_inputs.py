@@ -86,7 +86,7 @@ def test_make_all_runs_every_stage_and_a_parameter_change_reruns_only_what_follo
     from glimpse.fixtures.scenes import make_scene
 
     make_scene("demo", tmp_path / "scene", "tiny", seed=0)
-    short = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.005"
+    short = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.005 07_eval.renders.enabled=false"
     args = (f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}")
     result = _make("all", *args, f"PARAMS={short}")
     run_dir = tmp_path / "out" / "demo_tiny"

@@ -1,4 +1,4 @@
-"""Stage 07: metrics of stage 06's reconstruction on held-out views (renders, edits and speed: issue #11).
+"""Stage 07: metrics of stage 06's reconstruction on held-out views, and the standard videos (renders, edits).
 
 Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (the people's mean colours; the ground
          truth when scoring the input view), 06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz,
@@ -12,6 +12,8 @@ Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
                  (the whole frame); baselines (empty render, bodies in mean colour) in the humans and
                  never-seen tables; per-view values and each table's protocol
   metrics.md     the same tables in Markdown, each followed by its protocol
+  renders/       input.mp4, heldout_<camera>.mp4, orbit.mp4, freeze.mp4, person_<pid>.mp4, removed_<pid>.mp4,
+                 motion_<pid>.mp4 (glimpse/replay/standard.py; 07_eval.renders)
 """
 
 import json
@@ -34,6 +36,8 @@ from glimpse.humans.visibility import BodyVisibility  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.lpips import LPIPS  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
+from glimpse.replay.finished import FinishedRun  # noqa: E402
+from glimpse.replay.standard import write_render_set  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "07_eval"
@@ -63,6 +67,14 @@ def run(ctx: StageContext) -> None:
                              PosedBodies(people, visibility, body_model), [colours[p.pid] for p in people])
     write_tables(tables, prior, view_set.description, ctx.out)
     ctx.formats.update({"metrics.json": METRICS_FORMAT, "metrics.md": "markdown"})
+    if config.renders.enabled:
+        finished = FinishedRun(joint.parent, width, height, cameras, background, people, body_model, render)
+        heldout = view_set.views if view_set.source == "held-out" else []
+        with ctx.timed("renders"):
+            videos = write_render_set(finished, config.renders, heldout, sfm / "frames", scene.fps,
+                                      ctx.out / "renders", device)
+        ctx.formats.update({f"renders/{name}": "mp4 (H.264)" for name in videos})
+        ctx.summary["renders"] = videos
     ctx.summary.update({"views": view_set.source, "view_count": len(view_set.views), "prior": prior,
                         **headline(tables)})
 

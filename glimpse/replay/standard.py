@@ -1,0 +1,119 @@
+"""Stage 07's standard set of videos of a finished run (docs/renders.md, CONTRACTS.md 07_eval):
+
+  input.mp4                 the input view re-rendered, beside the input frame
+  heldout_<camera>.mp4      each held-out camera's render beside its ground truth
+  orbit.mp4                 the camera turning once around the people while the video plays
+  freeze.mp4                time frozen at the chosen frame, the camera turning around (a turntable)
+  person_<pid>.mp4          each person alone in canonical pose, turning (elevation 0)
+  removed_<pid>.mp4         the input view without the chosen person
+  motion_<pid>.mp4          the chosen person driven by a new motion from the chosen frame, scene frozen
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from glimpse.background.stage import render_camera
+from glimpse.body.motion import builtin_motion, load_motion
+from glimpse.eval.config import RenderSetConfig
+from glimpse.eval.views import ScoredView
+from glimpse.errors import GlimpseError
+from glimpse.io.images import frame_files, read_rgb
+from glimpse.io.video import write_mp4
+from glimpse.prior.orbit import orbit_camera
+from glimpse.render import rasterize
+from glimpse.replay.cameras import Shot, mean_up, orbit_path
+from glimpse.replay.finished import FinishedRun
+from glimpse.replay.motion import retarget
+from glimpse.replay.render import Edits, people_centre, render_shot, render_video
+
+
+def chosen_time(config: RenderSetConfig, run: FinishedRun) -> int:
+    frames = sorted(run.cameras)
+    if config.time == "middle":
+        return frames[len(frames) // 2]
+    if config.time not in run.cameras:
+        raise GlimpseError(f"07_eval.renders.time: frame {config.time} is not an input frame with a camera "
+                           f"(frames {frames[0]}..{frames[-1]})")
+    return int(config.time)
+
+
+def side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """Two [H, W, 3] uint8 images next to each other (the right one padded or cropped to the left's height)."""
+    height = left.shape[0]
+    right = right[:height]
+    right = np.pad(right, ((0, height - right.shape[0]), (0, 0), (0, 0)))
+    return np.concatenate([left, right], axis=1)
+
+
+@torch.no_grad()
+def canonical_turntable(run: FinishedRun, pid: str, config: RenderSetConfig, device: torch.device
+                        ) -> Iterator[np.ndarray]:
+    """The person alone in canonical pose from ``turntable_frames`` azimuths, white background."""
+    person = next(p for p in run.people if p.pid == pid)
+    points = person.rig.canonical_vertices.cpu().numpy()
+    centre = 0.5 * (points.min(0) + points.max(0))
+    size = config.turntable_size_px
+    for k in range(config.turntable_frames):
+        pinhole = orbit_camera(centre, 360.0 * k / config.turntable_frames, 0.0, config.turntable_radius_m,
+                               config.turntable_fovy_deg, size)
+        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(run.render.sh_degree),
+                        background=torch.ones(3, device=device), backend=run.render.backend).rgb
+        yield (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
+def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[ScoredView], frames_dir: Path,
+                     fps: float, out: Path, device: torch.device) -> dict[str, str]:
+    """Write every video of the set under ``out``; returns file name -> what it shows."""
+    written: dict[str, str] = {}
+    times = sorted(run.cameras)[:: max(config.every, 1)]
+    frozen = chosen_time(config, run)
+    step_fps = fps / max(config.every, 1)
+
+    def shot(t: int) -> Shot:
+        return Shot(run.cameras[t], run.width, run.height)
+
+    frames = frame_files(frames_dir)
+    inputs = [t for t in times if t in frames]
+    if inputs:
+        write_mp4(out / "input.mp4", (side_by_side(render_shot(run, shot(t), t, Edits(), device), read_rgb(frames[t]))
+                                      for t in inputs), step_fps)
+        written["input.mp4"] = "input view: render (left), input frame (right)"
+    by_camera: dict[str, list[ScoredView]] = {}
+    for view in heldout:
+        by_camera.setdefault(view.name.split("/")[0], []).append(view)
+    for camera, views in sorted(by_camera.items()):
+        write_mp4(out / f"heldout_{camera}.mp4", (side_by_side(
+            render_shot(run, Shot(v.camera, v.width, v.height), v.frame_id, Edits(), device), read_rgb(v.image))
+            for v in views), step_fps)
+        written[f"heldout_{camera}.mp4"] = f"held-out camera {camera}: render (left), ground truth (right)"
+    if not run.people:
+        return written
+    axis, start = mean_up(list(run.cameras.values())), run.cameras[frozen]
+    centre = people_centre(run.people, frozen)
+    orbit = orbit_path(start, run.width, run.height, centre, axis, len(times))
+    write_mp4(out / "orbit.mp4", render_video(run, list(zip(orbit, times)), Edits(), device), step_fps)
+    written["orbit.mp4"] = "one turn around the people while the video plays"
+    freeze = orbit_path(start, run.width, run.height, centre, axis, config.orbit_frames)
+    write_mp4(out / "freeze.mp4", render_video(run, [(s, frozen) for s in freeze], Edits(), device), fps)
+    written["freeze.mp4"] = f"time frozen at frame {frozen}, one turn around the people"
+    for person in run.people:
+        write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(run, person.pid, config, device), fps)
+        written[f"person_{person.pid}.mp4"] = f"{person.pid} alone, canonical pose, one turn"
+    chosen = run.people[0].pid if config.person == "first" else config.person
+    edits = Edits(frozenset({chosen}))
+    write_mp4(out / f"removed_{chosen}.mp4", render_video(run, [(shot(t), t) for t in times], edits, device), step_fps)
+    written[f"removed_{chosen}.mp4"] = f"input view without {chosen}"
+    person = next(p for p in run.people if p.pid == chosen)
+    if person.in_frame(frozen):
+        motion = (builtin_motion(config.motion.removeprefix("builtin:"), max(1, round(config.motion_seconds * fps)),
+                                 fps) if config.motion.startswith("builtin:") else load_motion(config.motion, fps))
+        driven = retarget(motion, person.body, frozen, run.body_model, np.arange(len(motion)))
+        write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(shot(frozen), frozen)] * len(motion),
+                                                             Edits(driven={chosen: driven}), device), fps)
+        written[f"motion_{chosen}.mp4"] = f"{chosen} driven by {config.motion} from frame {frozen}, scene frozen"
+    return written
