@@ -21,13 +21,21 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from glimpse.body.model import BodyModel
-from glimpse.body.motion import BodySequence
+from glimpse.body.motion import BodySequence, builtin_motion, load_motion
 from glimpse.body.params import BodyParams
 from glimpse.errors import GlimpseError
 
 CANONICAL_UP = np.array([0.0, 1.0, 0.0])
 CANONICAL_FORWARD = np.array([0.0, 0.0, 1.0])
 Z_UP_TO_Y_UP = Rotation.from_euler("x", -90.0, degrees=True)  # (x, y, z) -> (x, z, -y): z up becomes y up
+
+
+def motion_from_spec(source: str, fps: float, builtin_seconds: float) -> BodySequence:
+    """``builtin:NAME`` (``builtin_seconds`` of a built-in motion) or a motion .npz path (AMASS-style or
+    smplx-style), at ``fps``."""
+    if source.startswith("builtin:"):
+        return builtin_motion(source.removeprefix("builtin:"), max(1, round(builtin_seconds * fps)), fps)
+    return load_motion(source, target_fps=fps)
 
 
 @dataclass(frozen=True)

@@ -18,17 +18,16 @@ import numpy as np
 import torch
 
 from glimpse.background.stage import render_camera
-from glimpse.body.motion import builtin_motion, load_motion
 from glimpse.eval.config import RenderSetConfig
-from glimpse.eval.views import ScoredView
 from glimpse.errors import GlimpseError
+from glimpse.eval.views import ScoredView
 from glimpse.io.images import frame_files, read_rgb
 from glimpse.io.video import write_mp4
 from glimpse.prior.orbit import orbit_camera
 from glimpse.render import rasterize
 from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
-from glimpse.replay.motion import retarget
+from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, people_centre, render_shot, render_video
 
 
@@ -105,13 +104,15 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
         write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(run, person.pid, config, device), fps)
         written[f"person_{person.pid}.mp4"] = f"{person.pid} alone, canonical pose, one turn"
     chosen = run.people[0].pid if config.person == "first" else config.person
+    if chosen not in {p.pid for p in run.people}:
+        raise GlimpseError(f"07_eval.renders.person: no person {chosen!r} in the run (people: "
+                           f"{', '.join(p.pid for p in run.people)})")
     edits = Edits(frozenset({chosen}))
     write_mp4(out / f"removed_{chosen}.mp4", render_video(run, [(shot(t), t) for t in times], edits, device), step_fps)
     written[f"removed_{chosen}.mp4"] = f"input view without {chosen}"
     person = next(p for p in run.people if p.pid == chosen)
     if person.in_frame(frozen):
-        motion = (builtin_motion(config.motion.removeprefix("builtin:"), max(1, round(config.motion_seconds * fps)),
-                                 fps) if config.motion.startswith("builtin:") else load_motion(config.motion, fps))
+        motion = motion_from_spec(config.motion, fps, config.motion_seconds)
         driven = retarget(motion, person.body, frozen, run.body_model, np.arange(len(motion)))
         write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(shot(frozen), frozen)] * len(motion),
                                                              Edits(driven={chosen: driven}), device), fps)

@@ -10,12 +10,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from glimpse.body.motion import BodySequence, builtin_motion, load_motion
+from glimpse.body.motion import BodySequence
 from glimpse.errors import GlimpseError
 from glimpse.io.images import write_png
 from glimpse.io.video import write_mp4
 from glimpse.replay.finished import load_finished_run
-from glimpse.replay.motion import retarget
+from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, pair_shots_and_times, render_video
 from glimpse.replay.request import camera_shots, parse_times
 
@@ -30,10 +30,7 @@ def load_motions(specs: list[str], fps: float, builtin_seconds: float) -> dict[s
         pid, sep, source = spec.partition("=")
         if not sep or not pid or not source:
             raise GlimpseError(f"--motion {spec!r}: give PID=FILE.npz or PID=builtin:NAME")
-        if source.startswith("builtin:"):
-            motions[pid] = builtin_motion(source.removeprefix("builtin:"), max(1, round(builtin_seconds * fps)), fps)
-        else:
-            motions[pid] = load_motion(Path(source), target_fps=fps)
+        motions[pid] = motion_from_spec(source, fps, builtin_seconds)
     return motions
 
 
