@@ -272,11 +272,8 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
     scene, run_dir = tiny
     assert cli(["render", str(run_dir), "--time", "0:3", "--out", str(tmp_path / "input.mp4")]) == 0
     assert len(read_mp4(tmp_path / "input.mp4")) == 4
-    assert cli(["render", str(run_dir), "--camera", "orbit:90", "--time", "2", "--orbit-frames", "3",
-                "--out", str(tmp_path / "orbit")]) == 0
-    assert len(list((tmp_path / "orbit").glob("*.png"))) == 3
     assert cli(["render", str(run_dir), "--camera", "heldout:cam00", "--scene", str(scene), "--time", "2",
-                "--out", str(tmp_path / "held")]) == 0
+                "--out", str(tmp_path / "held")]) == 0  # orbits: stage 07's videos and tests/test_replay.py
     assert len(list((tmp_path / "held").glob("*.png"))) == 1
     assert cli(["render", str(run_dir), "--remove", "p9"]) == 2 and "the run's people are p0, p1" in capsys.readouterr().err
     assert cli(["render", str(run_dir), "--time", "1", "--motion", "p0=builtin:walk", "--motion-seconds", "0.3",
