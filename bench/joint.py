@@ -44,9 +44,8 @@ from glimpse.humans.load import load_trained_people  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.io.images import write_png  # noqa: E402
 from glimpse.joint.compose import frame_gaussians, render_frame  # noqa: E402
-from glimpse.prior.orbit import orbit_camera  # noqa: E402
-from glimpse.render import rasterize  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
+from glimpse.replay.standard import canonical_turntable  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
 
 THREADS = 2
@@ -116,20 +115,9 @@ def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
 def turntables(run_dir: Path, picture: Path) -> None:
     """Every person's canonical Gaussians from TURNTABLE_VIEWS azimuths (elevation 0), one row per person."""
     people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
-    rows = []
-    for person in people:
-        points = person.rig.canonical_vertices.numpy()
-        centre = 0.5 * (points.min(0) + points.max(0))
-        strip = []
-        for k in range(TURNTABLE_VIEWS):
-            pinhole = orbit_camera(centre, 360.0 * k / TURNTABLE_VIEWS, 0.0, TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG,
-                                   TURNTABLE_PX)
-            camera = render_camera(pinhole, TURNTABLE_PX, TURNTABLE_PX, torch.device("cpu"))
-            with torch.no_grad():
-                rgb = rasterize(camera, **person.model.render_inputs(RENDER.sh_degree),
-                                background=torch.ones(3)).rgb.clamp(0, 1)
-            strip.append((rgb.numpy() * 255 + 0.5).astype(np.uint8))
-        rows.append(np.concatenate(strip, axis=1))
+    rows = [np.concatenate(list(canonical_turntable(person, RENDER.sh_degree, TURNTABLE_VIEWS, TURNTABLE_PX,
+                                                    TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG, RENDER.backend,
+                                                    torch.device("cpu"))), axis=1) for person in people]
     if rows:
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, np.concatenate(rows, axis=0))

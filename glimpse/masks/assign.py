@@ -58,6 +58,13 @@ def grow_within(seed: np.ndarray, within: np.ndarray, steps_px: float) -> np.nda
     return grown.astype(bool)
 
 
+def static_in_front(full: np.ndarray, candidate: np.ndarray, erode_px: float, reach_px: float) -> np.ndarray:
+    """[H, W] bool: where static scene is in front of a body whose projection is ``full``: the ``candidate``
+    pixels (static scene shows there) inside the body's interior (eroded by ``erode_px``), grown by
+    ``reach_px`` along candidate pixels of the body (thin parts the erosion drops, feet)."""
+    return grow_within(disk(full, erode_px, grow=False) & candidate, full & candidate, reach_px)
+
+
 # refine(body index, region [H, W], sure [H, W], forbidden [H, W]) -> refined region [H, W]
 Refiner = Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -93,7 +100,7 @@ def provided_frame_masks(layers: BodyLayers, visible: np.ndarray, erode_px: np.n
     of that inside the body where nobody is)."""
     order = [int(k) for k in np.argsort(layers.pelvis_depth, kind="stable")]
     nobody = ~visible.any(0)
-    in_front = np.stack([grow_within(disk(full, erode_px[p], grow=False) & nobody, full & nobody, reach_px[p])
+    in_front = np.stack([static_in_front(full, nobody, erode_px[p], reach_px[p])
                          for p, full in enumerate(layers.full)]) if len(visible) else None
     return FrameMasks(visible, _occluders(layers, visible, order, occluder_px, in_front, False), order)
 

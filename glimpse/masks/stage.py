@@ -26,7 +26,9 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
-from glimpse.masks.assign import FrameMasks, body_frame_masks, disk, grow_within, plate_refiner, provided_frame_masks
+from glimpse.masks.assign import (
+    FrameMasks, body_frame_masks, disk, plate_refiner, provided_frame_masks, static_in_front,
+)
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
 from glimpse.masks.plate import Plate, median_plate
@@ -151,8 +153,7 @@ def body_mode_masks(config: MasksConfig, refine_kind: str, layers: BodyLayers, c
         static, moving = static_evidence
         # static colour means scene (not person) only where the body there, or next to it, moves; it is
         # trusted in the body's interior, and from there reaches the thin parts (feet) the erosion drops
-        in_front = np.stack([grow_within(disk(full, erode[k], grow=False) & static & moving[k],
-                                         full & static & moving[k], reach[k])
+        in_front = np.stack([static_in_front(full, static & moving[k], erode[k], reach[k])
                              for k, full in enumerate(layers.full)])
         near = np.stack([static & disk(moving[k] & full, dilate[k]) for k, full in enumerate(layers.full)])
     refine = None

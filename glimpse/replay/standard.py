@@ -22,6 +22,7 @@ from glimpse.eval.config import RenderSetConfig
 from glimpse.errors import GlimpseError
 from glimpse.eval.views import ScoredView
 from glimpse.io.images import frame_files, read_rgb
+from glimpse.humans.person import PersonGaussians
 from glimpse.io.video import write_mp4
 from glimpse.prior.orbit import orbit_camera
 from glimpse.render import rasterize
@@ -50,18 +51,16 @@ def side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
 
 
 @torch.no_grad()
-def canonical_turntable(run: FinishedRun, pid: str, config: RenderSetConfig, device: torch.device
-                        ) -> Iterator[np.ndarray]:
-    """The person alone in canonical pose from ``turntable_frames`` azimuths, white background."""
-    person = next(p for p in run.people if p.pid == pid)
+def canonical_turntable(person: PersonGaussians, sh_degree: int, frames: int, size: int, radius_m: float,
+                        fovy_deg: float, backend: str, device: torch.device) -> Iterator[np.ndarray]:
+    """[size, size, 3] uint8 renders of the person alone in canonical pose from ``frames`` azimuths evenly
+    spread over a turn (0 = the front), elevation 0, ``radius_m`` from the body's centre, on white."""
     points = person.rig.canonical_vertices.cpu().numpy()
     centre = 0.5 * (points.min(0) + points.max(0))
-    size = config.turntable_size_px
-    for k in range(config.turntable_frames):
-        pinhole = orbit_camera(centre, 360.0 * k / config.turntable_frames, 0.0, config.turntable_radius_m,
-                               config.turntable_fovy_deg, size)
-        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(run.render.sh_degree),
-                        background=torch.ones(3, device=device), backend=run.render.backend).rgb
+    for k in range(frames):
+        pinhole = orbit_camera(centre, 360.0 * k / frames, 0.0, radius_m, fovy_deg, size)
+        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(sh_degree),
+                        background=torch.ones(3, device=device), backend=backend).rgb
         yield (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
@@ -101,7 +100,9 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     write_mp4(out / "freeze.mp4", render_video(run, [(s, frozen) for s in freeze], Edits(), device), fps)
     written["freeze.mp4"] = f"time frozen at frame {frozen}, one turn around the people"
     for person in run.people:
-        write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(run, person.pid, config, device), fps)
+        write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(
+            person, run.render.sh_degree, config.turntable_frames, config.turntable_size_px,
+            config.turntable_radius_m, config.turntable_fovy_deg, run.render.backend, device), fps)
         written[f"person_{person.pid}.mp4"] = f"{person.pid} alone, canonical pose, one turn"
     chosen = run.people[0].pid if config.person == "first" else config.person
     if chosen not in {p.pid for p in run.people}:
