@@ -12,6 +12,8 @@ PYTHON ?= python3
 # torch is pinned in constraints.txt; a GPU box may point CONSTRAINTS at its own file.
 CONSTRAINTS ?= constraints.txt
 STAGES_DIR ?= stages
+# Worker processes of `make test` (pytest-xdist; each test file stays in one worker, which keeps module fixtures shared).
+TEST_WORKERS ?= 2
 
 PY := $(VENV)/bin/python
 export PYTHONPATH := $(CURDIR)$(if $(PYTHONPATH),:$(PYTHONPATH))
@@ -76,7 +78,7 @@ print-dag:
 	@$(PIPELINE) print-dag
 
 test: $(VENV)/.installed-test
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 bench: venv
 	$(PY) bench/run_all.py

@@ -140,7 +140,9 @@ def test_priors_are_chosen_by_name_and_unknown_ones_are_listed():
 
 SHORT = ("04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.02 "  # 300 and 240 iterations
          "07_eval.renders.orbit_frames=6 07_eval.renders.turntable_frames=4 07_eval.renders.turntable_size_px=48 "
-         "07_eval.renders.motion_seconds=2 07_eval.renders.time=1")  # short videos, from frame 1 (p0 in view)
+         "07_eval.renders.motion_seconds=2 07_eval.renders.time=1 "  # short videos, from frame 1 (p0 in view)
+         "07_eval.speed.sizes_px=[64] 07_eval.speed.frames=2 07_eval.speed.warmup_frames=1 "
+         "07_eval.speed.scene_frames=2")
 
 
 @pytest.fixture(scope="module")
@@ -213,6 +215,26 @@ def test_stage07_writes_the_standard_videos(tiny):
     assert np.abs(moved[-1] - moved[0]).max() > 50  # the driven person walked
 
 
+def test_stage07_times_each_person_in_novel_poses_and_the_whole_scene(tiny):
+    from glimpse.replay.speed import SPEED_FORMAT
+
+    _, run_dir = tiny
+    speed = read_json(run_dir / "07_eval" / "speed.json")
+    people = read_json(run_dir / "06_joint_opt" / "report.json")["people"]
+    assert speed["format"] == SPEED_FORMAT and speed["backend"] == "cpu" and set(speed["people"]) == {"p0", "p1"}
+    for pid, entry in speed["people"].items():
+        timing = entry["novel_pose"]["64"]
+        assert entry["gaussians"] == timing["gaussians"] == people[pid]["gaussians"]
+        assert (timing["width"], timing["height"], timing["frames"]) == (64, 64, 2) and timing["fps"] > 0
+    background, _ = read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")
+    scene = speed["scene"]
+    assert len(background.means) < scene["gaussians"] <= len(background.means) + sum(
+        e["gaussians"] for e in speed["people"].values())
+    assert scene["frames"] == 2 and (scene["peak_extra_mb"] is None or scene["peak_extra_mb"] >= 0)
+    table = (run_dir / "07_eval" / "speed.md").read_text()
+    assert "| p0 |" in table and "| input views |" in table and "Protocol:" in table
+
+
 def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):
     scene, run_dir = tiny
     metrics = read_json(run_dir / "07_eval" / "metrics.json")
@@ -225,7 +247,8 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
     assert metrics["tables"]["never_seen"]["rows"][0]["psnr"] > metrics["tables"]["never_seen"]["rows"][1]["psnr"]
     text = (run_dir / "07_eval" / "metrics.md").read_text()
     assert "Humans only" in text and "union of the people's masks" in text and "none of whose vertices" in text
-    out = run("07_eval", scene, run_dir.parent, SHORT + " 07_eval.heldout=input 07_eval.renders.enabled=false")
+    out = run("07_eval", scene, run_dir.parent,
+              SHORT + " 07_eval.heldout=input 07_eval.renders.enabled=false 07_eval.speed.enabled=false")
     assert "INPUT view" in read_json(out / "metrics.json")["views"]
 
 

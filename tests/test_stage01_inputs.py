@@ -82,18 +82,21 @@ def _make(*args, cwd=REPO):
                           capture_output=True, text=True, timeout=600)
 
 
-def test_make_all_runs_every_stage_and_a_parameter_change_reruns_only_what_follows(tmp_path):
-    from glimpse.fixtures.scenes import make_scene
-
-    make_scene("demo", tmp_path / "scene", "tiny", seed=0)
-    short = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.005 07_eval.renders.enabled=false"
-    args = (f"SCENE={tmp_path / 'scene'}", f"OUT={tmp_path / 'out'}")
-    result = _make("all", *args, f"PARAMS={short}")
-    run_dir = tmp_path / "out" / "demo_tiny"
+def test_make_demo_runs_every_stage_prints_the_metrics_and_a_change_reruns_only_what_follows(tmp_path):
+    """`make demo` (glimpse.demo: the scene generated once, then `make all`), then `make all` on its scene with
+    one stage-07 parameter changed."""
+    short = "04_bg_pretrain.schedule_scale=0.01 06_joint_opt.schedule_scale=0.005 07_eval.renders.enabled=false "\
+            "07_eval.speed.enabled=false"
+    result = subprocess.run([sys.executable, "-m", "glimpse.demo", "--out", str(tmp_path), "--size", "tiny",
+                             "--params", short], cwd=REPO, capture_output=True, text=True, timeout=600)
+    run_dir = tmp_path / "demo_tiny"
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
+    assert "the whole pipeline ran" in result.stdout
+    assert "| humans only |" in result.stdout and "Protocol" not in result.stdout
     stamps = {stage: (run_dir / stage / "manifest.json").stat().st_mtime_ns for stage in STAGE_NAMES}
-    result = _make("all", *args, f"PARAMS={short} 07_eval.input_view_every=2")
+    result = _make("all", f"SCENE={tmp_path / 'scenes' / 'demo_tiny'}", f"OUT={tmp_path}",
+                   f"PARAMS={short} 07_eval.input_view_every=2")
     assert result.returncode == 0, result.stderr
     changed = {stage for stage in STAGE_NAMES if (run_dir / stage / "manifest.json").stat().st_mtime_ns != stamps[stage]}
     assert changed == {"07_eval"}

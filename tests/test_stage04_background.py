@@ -143,7 +143,7 @@ def test_a_killed_run_resumes_from_its_checkpoint_and_ends_as_an_uninterrupted_o
     twin = tmp_path / "twin"  # the same upstream outputs under a second root, for an uninterrupted run
     for stage in UPSTREAM:
         shutil.copytree(run_dir / stage, twin / "demo_tiny" / stage)
-    params = "04_bg_pretrain.schedule_scale=0.02 04_bg_pretrain.checkpoint_every=50 04_bg_pretrain.render_video=false"
+    params = "04_bg_pretrain.schedule_scale=0.01 04_bg_pretrain.checkpoint_every=50 04_bg_pretrain.render_video=false"
     checkpoint = run_dir / ".work" / "04_bg_pretrain" / "checkpoint.pt"
     process = subprocess.Popen([sys.executable, str(REPO / "stages" / "04_bg_pretrain" / "run.py"), "--scene",
                                 str(scene), "--out", str(tmp_path / "out"), "--params", params],

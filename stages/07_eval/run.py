@@ -14,6 +14,9 @@ Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
   metrics.md     the same tables in Markdown, each followed by its protocol
   renders/       input.mp4, heldout_<camera>.mp4, orbit.mp4, freeze.mp4, person_<pid>.mp4, removed_<pid>.mp4,
                  motion_<pid>.mp4 (glimpse/replay/standard.py; 07_eval.renders)
+  speed.json     glimpse-speed/1: novel-pose frames per second of each person at each size, and of the whole
+                 scene at the input resolution, with peak memory (glimpse/replay/speed.py; 07_eval.speed)
+  speed.md       the same as Markdown tables
 """
 
 import json
@@ -37,6 +40,7 @@ from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.lpips import LPIPS  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.replay.finished import FinishedRun  # noqa: E402
+from glimpse.replay.speed import SPEED_FORMAT, speed_markdown, speed_report  # noqa: E402
 from glimpse.replay.standard import write_render_set  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -67,14 +71,21 @@ def run(ctx: StageContext) -> None:
                              PosedBodies(people, visibility, body_model), [colours[p.pid] for p in people])
     write_tables(tables, prior, view_set.description, ctx.out)
     ctx.formats.update({"metrics.json": METRICS_FORMAT, "metrics.md": "markdown"})
+    finished = FinishedRun(joint.parent, width, height, cameras, background, people, body_model, render)
     if config.renders.enabled:
-        finished = FinishedRun(joint.parent, width, height, cameras, background, people, body_model, render)
         heldout = view_set.views if view_set.source == "held-out" else []
         with ctx.timed("renders"):
             videos = write_render_set(finished, config.renders, heldout, sfm / "frames", scene.fps,
                                       ctx.out / "renders", device)
         ctx.formats.update({f"renders/{name}": "mp4 (H.264)" for name in videos})
         ctx.summary["renders"] = videos
+    if config.speed.enabled:
+        with ctx.timed("speed"):
+            report = speed_report(finished, config.speed, device, lambda line: print(line, file=sys.stderr, flush=True))
+        (ctx.out / "speed.json").write_text(json.dumps(report, indent=2) + "\n")
+        (ctx.out / "speed.md").write_text(speed_markdown(report))
+        ctx.formats.update({"speed.json": SPEED_FORMAT, "speed.md": "markdown"})
+        ctx.summary["scene_fps"] = report["scene"]["fps"]
     ctx.summary.update({"views": view_set.source, "view_count": len(view_set.views), "prior": prior,
                         **headline(tables)})
 

@@ -1,0 +1,84 @@
+"""Render-speed measurement (glimpse/replay/speed.py): the memory probe, the novel-pose set-up it times,
+and what it reports (stage 07's speed.json itself: tests/test_joint.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.background.stage import render_camera
+from glimpse.body.config import BodyConfig, resolve_model_path
+from glimpse.body.model import BodyModel
+from glimpse.body.motion import builtin_motion
+from glimpse.body.params import BodyParams
+from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.errors import ConfigError
+from glimpse.eval.config import SpeedConfig
+from glimpse.humans.person import initial_person
+from glimpse.prior.orbit import orbit_camera
+from glimpse.render import rasterize
+from glimpse.replay.speed import PeakMemory, driven_in_body_frame, evenly_spread, time_novel_pose
+
+PIPELINE = load_pipeline_yaml()
+BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
+SPEED = config_from_mapping(SpeedConfig, PIPELINE["07_eval"]["speed"], "07_eval.speed")
+CPU = torch.device("cpu")
+
+
+@pytest.fixture(scope="module")
+def person():
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    standing = BodyParams(np.array([0]), np.zeros(10), np.zeros((1, 3)), np.zeros((1, 69)), np.zeros((1, 3)), 1.0,
+                          "free", np.zeros(1, bool))
+    return initial_person("p0", body_model, standing, BODY.canonical_hip_angle_deg, BODY.skinning, 0.5, 0.9, 3, 2)
+
+
+def test_the_memory_probe_sees_a_temporary_allocation():
+    with PeakMemory(CPU) as peak:
+        block = torch.ones(16 * 2**20)  # 64 MB, touched
+        block += 1.0
+        del block
+    if peak.extra_mb is None:
+        pytest.skip("this system cannot reset its peak resident memory (/proc/self/clear_refs)")
+    assert 56 < peak.extra_mb < 200
+    with PeakMemory(CPU) as quiet:
+        torch.ones(16)
+    assert quiet.extra_mb < 16
+
+
+def test_the_driven_person_walks_at_the_pelvis_the_camera_circles(person):
+    motion = builtin_motion("walk", 8, 30.0)
+    driven = driven_in_body_frame(person, motion)
+    pelvis = driven.rig.rest_joints[0] + driven.transl  # [T, 3]
+    for step in (0, 7):
+        posed = driven.posed(step, torch.zeros(3), 0)
+        assert torch.linalg.norm(posed.means.mean(0) - pelvis[step]) < 0.2  # the body is around its pelvis
+    assert torch.linalg.norm(pelvis[7] - pelvis[0]) > 0.05  # the walk moves forward
+    size = 96
+    camera = render_camera(orbit_camera(pelvis[3].double().numpy(), 90.0, 0.0, SPEED.radius_m, SPEED.fovy_deg, size),
+                           size, size, CPU)
+    posed = driven.posed(3, camera.centre, 0)
+    alpha = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
+                      colors=posed.colors).alpha
+    rows = torch.nonzero(alpha.amax(dim=1) > 0.5)[:, 0]
+    height = (rows.max() - rows.min() + 1) / size
+    assert 0.55 < height < 0.85  # as the protocol says: the body fills about 70% of the image height
+
+
+def test_a_timing_counts_the_persons_gaussians_and_its_parts(person):
+    config = dataclasses.replace(SPEED, frames=3, warmup_frames=1)
+    timing = time_novel_pose(person, builtin_motion("walk", 3, 30.0), 48, config, 2, "cpu", CPU)
+    assert timing.gaussians == len(person.model) and (timing.width, timing.height, timing.frames) == (48, 48, 3)
+    assert timing.posing_ms > 0 and timing.raster_ms > 0 and timing.fps == pytest.approx(1000 / timing.ms_per_frame)
+    assert timing.as_dict()["fps"] == pytest.approx(timing.fps, abs=0.01)
+
+
+def test_speed_settings_are_checked_and_frames_spread():
+    with pytest.raises(ConfigError, match="07_eval.speed"):
+        dataclasses.replace(SPEED, sizes_px=[])
+    with pytest.raises(ConfigError, match="07_eval.speed"):
+        dataclasses.replace(SPEED, fovy_deg=180.0)
+    assert evenly_spread([3, 4, 5, 6, 7], 3) == [3, 5, 7] and evenly_spread([1, 2], 5) == [1, 2]
