@@ -78,7 +78,7 @@ def surface_person(body_model: BodyModel, body: BodyConfig, count: int, rng: np.
     transl = np.zeros(3) if transl is None else transl
     params = BodyParams(np.array([0]), np.zeros(10), np.zeros((1, 3)), np.zeros((1, 69)), transl[None], 1.0,
                         "free", np.zeros(1, bool))
-    return PersonGaussians(pid, model, grid, rig, params)
+    return PersonGaussians(pid, model, grid, rig, params).freeze()
 
 
 def room_background(count: int, rng: np.random.Generator) -> GaussianModel:
@@ -121,13 +121,15 @@ def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) 
     total = config.warmup_frames + config.frames
     inputs = person.model.render_inputs(SH_DEGREE)
 
+    cameras = [render_camera(orbit_camera(centre, 360.0 * k / total, 0.0, config.radius_m, config.fovy_deg, size),
+                             size, size, device) for k in range(total)]
+
     def draw(k: int, camera) -> int:
-        rasterize(camera, **inputs, background=torch.ones(3)).rgb
+        rasterize(camera, **inputs, background=torch.ones(3))
         return len(person.model)
 
     def pose(k: int):
-        return render_camera(orbit_camera(centre, 360.0 * k / total, 0.0, config.radius_m, config.fovy_deg, size),
-                             size, size, device)
+        return cameras[k]
 
     return time_frames(config.frames, config.warmup_frames, pose, draw, device, size, size)
 

@@ -10,7 +10,7 @@ DEPS_03_masks := 01_sfm 02_smpl_fit
 DEPS_04_bg_pretrain := 01_sfm 02_smpl_fit 03_masks
 DEPS_05_textual_inversion := 01_sfm 02_smpl_fit 03_masks
 DEPS_06_joint_opt := 01_sfm 02_smpl_fit 03_masks 04_bg_pretrain 05_textual_inversion
-DEPS_07_eval := 01_sfm 02_smpl_fit 03_masks 06_joint_opt
+DEPS_07_eval := 01_sfm 02_smpl_fit 03_masks 04_bg_pretrain 06_joint_opt
 
 # Where the stage scripts live (tests point it at their own).
 STAGES_DIR ?= stages

@@ -1,5 +1,6 @@
-"""Render-speed measurement (glimpse/replay/speed.py): the memory probe, the novel-pose set-up it times,
-and what it reports (stage 07's speed.json itself: tests/test_joint.py)."""
+"""Rendering finished runs fast: a frozen person's posing (the C++ kernel and the cached PyTorch path)
+against the training path, and the render-speed measurement (glimpse/replay/speed.py): the memory
+probe, the novel-pose set-up it times, what it reports (stage 07's speed.json: tests/test_joint.py)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,35 @@ def person():
     standing = BodyParams(np.array([0]), np.zeros(10), np.zeros((1, 3)), np.zeros((1, 69)), np.zeros((1, 3)), 1.0,
                           "free", np.zeros(1, bool))
     return initial_person("p0", body_model, standing, BODY.canonical_hip_angle_deg, BODY.skinning, 0.5, 0.9, 3, 2)
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_a_frozen_person_poses_as_the_training_path_does(degree, monkeypatch):
+    from glimpse.humans.person import PersonGaussians
+    from glimpse.render import composite_cpu
+
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    rng = np.random.default_rng(degree)
+    frames = 2
+    body = BodyParams(np.arange(frames), rng.normal(0, 0.5, 10), rng.normal(0, 0.4, (frames, 3)),
+                      rng.normal(0, 0.3, (frames, 69)), rng.normal(0, 1.0, (frames, 3)), 1.3, "free",
+                      np.zeros(frames, bool))
+    start = initial_person("p0", body_model, body, BODY.canonical_hip_angle_deg, BODY.skinning, 0.5, 0.9, 3, 3)
+    with torch.no_grad():  # anisotropic, turned, coloured from every direction
+        start.model.sh_rest.normal_(0.0, 0.2, generator=torch.Generator().manual_seed(degree))
+        start.model.quats.copy_(torch.as_tensor(rng.normal(size=(len(start.model), 4))))
+        start.model.log_scales.add_(torch.as_tensor(rng.normal(0.0, 0.5, (len(start.model), 3)), dtype=torch.float32))
+    centre = torch.tensor([0.3, -0.2, 4.0])
+    expected = start.posed(1, centre, degree)  # gradients on: the training path
+    frozen = PersonGaussians(start.pid, start.model, start.grid, start.rig, body).freeze()
+    with torch.no_grad():
+        kernel = frozen.posed(1, centre, degree)
+        monkeypatch.setattr(composite_cpu, "available", lambda: False)
+        cached = frozen.posed(1, centre, degree)
+    for name in ("means", "covariances", "opacities", "colors"):
+        want = getattr(expected, name).detach()
+        assert torch.allclose(getattr(kernel, name), want, rtol=1e-5, atol=2e-6), name
+        assert torch.allclose(getattr(cached, name), want, rtol=1e-6, atol=1e-7), name
 
 
 def test_the_memory_probe_sees_a_temporary_allocation():

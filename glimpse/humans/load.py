@@ -17,7 +17,8 @@ from glimpse.humans.person import PersonGaussians, build_rig
 
 def load_trained_people(humans_dir: Path, body_model: BodyModel) -> list[PersonGaussians]:
     """Every person under ``humans_dir`` (stage 06's ``humans/``), in pid order, posed by the refined poses
-    of body.npz (pose offsets start at zero). The Da-pose angle is the one stage 06 trained with."""
+    of body.npz (pose offsets start at zero), frozen for rendering (PersonGaussians.freeze). The Da-pose
+    angle is the one stage 06 trained with."""
     people: list[PersonGaussians] = []
     if not humans_dir.is_dir():  # stage 06 trained nobody (no person had a body in a frame with a camera)
         return people
@@ -29,5 +30,5 @@ def load_trained_people(humans_dir: Path, body_model: BodyModel) -> list[PersonG
             grid = SkinWeightGrid.from_npz_dict(dict(data), str(folder / "skinning.npz"))
         body = read_body_params(folder / "body.npz")
         rig = build_rig(body_model, body.betas, float(metadata["canonical_hip_angle_deg"]))
-        people.append(PersonGaussians(folder.name, GaussianModel.from_splats(splats), grid, rig, body))
+        people.append(PersonGaussians(folder.name, GaussianModel.from_splats(splats), grid, rig, body).freeze())
     return people

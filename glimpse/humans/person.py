@@ -6,6 +6,10 @@ frame's pose: ``A = (sum_j w_j P_j) (sum_j w_j C_j)^-1`` per Gaussian (glimpse.b
 means ``A mu``, covariances ``A Σ Aᵀ``; spherical harmonics are evaluated for the view direction
 rotated into the canonical frame by the polar (closest-rotation) part of A (CONTRACTS.md).
 Optional per-frame pose refinement adds a learnt axis-angle offset to each frame's pose.
+
+Once training is over (rendering a finished run), ``freeze()`` caches what no frame changes (skin
+weights, the canonical blends' inverses, canonical covariances, SH); ``posed`` without gradients then
+takes the C++ kernel (csrc/pose_cpu.cpp) on CPU, or the same maths in PyTorch elsewhere.
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ from glimpse.body.lbs import batch_rigid_transform, batch_rodrigues
 from glimpse.body.model import BodyModel, scaled_translated
 from glimpse.body.params import BodyParams
 from glimpse.body.skinning import (
-    SkinWeightGrid, bake_skin_weight_grid, canonical_body_pose, canonical_to_posed, deform_gaussians,
+    SkinWeightGrid, bake_skin_weight_grid, blend_transforms, canonical_body_pose, canonical_to_posed,
+    deform_gaussians, invert_affine,
 )
 from glimpse.gaussians.model import GaussianModel, knn_scales
 from glimpse.render.projection import quat_scale_to_covariance
@@ -80,6 +85,15 @@ def polar_rotation(matrices: Tensor) -> Tensor:
         return x
 
 
+def view_colours(blended: Tensor, means: Tensor, camera_centre: Tensor, degree: int, sh: Tensor) -> Tensor:
+    """[N, 3] colours of posed Gaussians (``blended [N, 4, 4]``, posed ``means [N, 3]``) seen from ``camera_centre``:
+    SH ``sh [N, K, 3]`` up to ``degree``, the view direction rotated into the canonical frame (CONTRACTS.md)."""
+    dirs = means - camera_centre
+    if degree > 0:
+        dirs = rotate_view_dirs(dirs, polar_rotation(blended[:, :3, :3]))
+    return sh_to_rgb(degree, sh[:, : num_sh_coeffs(degree)], dirs)
+
+
 @dataclass
 class PosedGaussians:
     """A person's Gaussians in one frame, ready for the rasterizer (world frame)."""
@@ -88,6 +102,19 @@ class PosedGaussians:
     covariances: Tensor  # [N, 3, 3]
     opacities: Tensor  # [N]
     colors: Tensor  # [N, 3]
+
+
+@dataclass(frozen=True)
+class FrozenPosing:
+    """Per-Gaussian quantities of a trained person that no frame changes: skin weights [N, J], the inverse of
+    the canonical blend (sum_j w_j C_j)^-1 [N, 4, 4], canonical covariances [N, 3, 3], SH [N, K, 3] and
+    opacities [N]."""
+
+    weights: Tensor
+    canonical_inverse: Tensor
+    covariances: Tensor
+    sh: Tensor
+    opacities: Tensor
 
 
 class PersonGaussians(nn.Module):
@@ -102,6 +129,7 @@ class PersonGaussians(nn.Module):
                                          dtype=torch.float32)  # [T, 72]
         self.transl = torch.as_tensor(body.transl, dtype=torch.float32)  # [T, 3]
         self.pose_offsets = nn.Parameter(torch.zeros(len(body.frame_ids), POSE_DIM))  # [T, 72] radians
+        self.frozen: FrozenPosing | None = None
 
     def to(self, *args, **kwargs) -> "PersonGaussians":
         module = super().to(*args, **kwargs)
@@ -111,7 +139,20 @@ class PersonGaussians(nn.Module):
                                    self.grid.bounds_max.to(device))
         self.rig = BodyRig(self.rig.rest_joints.to(device), self.rig.parents,
                            self.rig.canonical_transforms.to(device), self.rig.canonical_vertices.to(device))
+        if self.frozen is not None:
+            self.freeze()
         return module
+
+    @torch.no_grad()
+    def freeze(self) -> PersonGaussians:
+        """Cache what posing needs that no frame changes, for rendering only (training must not follow: the
+        cache would go stale). Returns self."""
+        weights = self.grid.lookup(self.model.means).contiguous()
+        self.frozen = FrozenPosing(
+            weights, invert_affine(blend_transforms(weights, self.rig.canonical_transforms)).contiguous(),
+            quat_scale_to_covariance(self.model.quats, self.model.scales()).contiguous(),
+            self.model.sh().contiguous(), self.model.opacities().contiguous())
+        return self
 
     @property
     def scale(self) -> float:
@@ -135,15 +176,31 @@ class PersonGaussians(nn.Module):
 
     def posed(self, frame_id: int, camera_centre: Tensor, sh_degree: int) -> PosedGaussians:
         """The Gaussians in ``frame_id`` seen from ``camera_centre [3]`` (world), colours up to ``sh_degree``."""
+        degree = min(sh_degree, self.model.sh_degree)
+        if self.frozen is not None and not torch.is_grad_enabled():
+            return self._posed_frozen(frame_id, camera_centre, degree)
         blended = self.blended_transforms(frame_id)
         covariances = quat_scale_to_covariance(self.model.quats, self.model.scales())
         means, covariances = deform_gaussians(self.model.means, covariances, blended)
-        degree = min(sh_degree, self.model.sh_degree)
-        sh = self.model.sh()[:, : num_sh_coeffs(degree)]
-        dirs = means - camera_centre
-        if degree > 0:
-            dirs = rotate_view_dirs(dirs, polar_rotation(blended[:, :3, :3]))
-        return PosedGaussians(means, covariances, self.model.opacities(), sh_to_rgb(degree, sh, dirs))
+        colours = view_colours(blended, means, camera_centre, degree, self.model.sh())
+        return PosedGaussians(means, covariances, self.model.opacities(), colours)
+
+    def _posed_frozen(self, frame_id: int, camera_centre: Tensor, degree: int) -> PosedGaussians:
+        """posed() from the frozen cache: the C++ kernel on CPU when it builds, else PyTorch (same maths)."""
+        from glimpse.render import composite_cpu
+
+        row = self.row_of_frame[int(frame_id)]
+        posed = joint_transforms(self.rig, self.pose(frame_id), self.transl[row], self.scale)
+        cache, means = self.frozen, self.model.means.detach()
+        if means.device.type == "cpu" and composite_cpu.available():
+            means, covariances, colours = composite_cpu.extension().pose_forward(
+                cache.weights, posed.float().contiguous(), cache.canonical_inverse, means, cache.covariances,
+                cache.sh, degree, camera_centre.float().contiguous())
+        else:
+            blended = blend_transforms(cache.weights, posed) @ cache.canonical_inverse
+            means, covariances = deform_gaussians(means, cache.covariances, blended)
+            colours = view_colours(blended, means, camera_centre, degree, cache.sh)
+        return PosedGaussians(means, covariances, cache.opacities, colours)
 
     def refined_body(self) -> BodyParams:
         """The body parameters with the learnt pose offsets added (stage 06's body.npz)."""

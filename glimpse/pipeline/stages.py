@@ -73,7 +73,7 @@ STAGES: tuple[StageSpec, ...] = (
     ),
     StageSpec(
         "07_eval",
-        upstream=("01_sfm", "02_smpl_fit", "03_masks", "06_joint_opt"),
+        upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "06_joint_opt"),
         shared=("compute", "body", "render"),
         scene_inputs=("eval/**/*",),
     ),

@@ -1,4 +1,5 @@
-"""The C++ kernels (csrc/: tile binning and compositing, projection): built on first use, cached.
+"""The C++ kernels (csrc/: tile binning and compositing, projection, posing a frozen person): built on
+first use, cached.
 
 The build cache is keyed by the source, the flags and torch's version, under
 $GLIMPSE_CACHE (default ~/.cache/glimpse). Flags are portable (-O3 -mavx2 -mfma, plus
@@ -24,7 +25,8 @@ from glimpse.errors import GlimpseError
 from glimpse.render.binning import TileBins
 
 log = logging.getLogger("glimpse")
-SOURCES = [Path(__file__).resolve().parent / "csrc" / name for name in ("composite_cpu.cpp", "project_cpu.cpp")]
+CSRC = Path(__file__).resolve().parent / "csrc"
+SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "pose_cpu.cpp")]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).

@@ -74,8 +74,8 @@ def pair_shots_and_times(shots: Sequence[Shot], times: Sequence[int]) -> list[tu
 
 def driven_people(run: FinishedRun, edits: Edits) -> list[PersonGaussians]:
     """The people of ``edits.driven``: their Gaussians and skinning, posed by the new body parameters."""
-    return [PersonGaussians(p.pid, p.model, p.grid, p.rig, edits.driven[p.pid]) for p in run.people
-            if p.pid in edits.driven and p.pid not in edits.removed]
+    return [PersonGaussians(p.pid, p.model, p.grid, p.rig, edits.driven[p.pid]).to(p.pose_offsets.device).freeze()
+            for p in run.people if p.pid in edits.driven and p.pid not in edits.removed]
 
 
 def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) -> FrameGaussians:

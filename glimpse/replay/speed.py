@@ -8,12 +8,13 @@ view-dependent colours) plus rasterizing. Whole scene: input views at the input 
 present posed plus the background, as stage 07's videos draw them.
 
 Times are medians over the timed frames, after untimed warm-up frames. Memory is the peak above what the
-process held before the first timed frame: resident memory on CPU (Linux, /proc/self), allocated memory
-on CUDA.
+process held before the first (warm-up) frame: the renderer's working memory, resident on CPU (Linux,
+/proc/self), allocated on CUDA; the Gaussians themselves are held before and counted apart (model_mb).
 """
 
 from __future__ import annotations
 
+import ctypes
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -30,7 +31,7 @@ from glimpse.eval.config import SpeedConfig
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.compose import frame_gaussians, render_frame
 from glimpse.prior.orbit import orbit_camera
-from glimpse.render import Camera, rasterize
+from glimpse.render import rasterize
 from glimpse.render.rasterize import choose_backend
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, upright
@@ -41,7 +42,7 @@ PROTOCOL = ("novel pose: each person alone on white, driven by {motion}, a camer
             "({radius_m} m away, {fovy_deg} degree field of view, square images); whole scene: {scene_frames} input "
             "views at the input resolution, people and background. One frame = posing + colours + rasterizing; "
             "median over {frames} timed frames after {warmup} warm-up frames; memory: peak above the level "
-            "before the first timed frame (resident on CPU, allocated on CUDA)")
+            "before the first frame (resident on CPU, allocated on CUDA)")
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,12 @@ def _resident_kb(field: str) -> int:
 
 
 def _reset_resident_peak() -> bool:
-    """Reset the process's peak resident memory (Linux >= 4.0); False where that is not possible."""
+    """Hand freed heap memory back to the system (glibc), so that reusing it counts again, and reset the
+    process's peak resident memory (Linux >= 4.0); False where that is not possible."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
     try:
         Path("/proc/self/clear_refs").write_text("5")
         _resident_kb("VmHWM")
@@ -116,20 +122,19 @@ def time_frames(frame_count: int, warmup: int, pose: Callable[[int], object], dr
                 device: torch.device, width: int, height: int) -> SpeedTiming:
     """Time ``pose(k)`` then ``draw(k, posed) -> Gaussians drawn`` for k in range(warmup + frame_count)."""
     posing, raster, counts = [], [], []
-    with torch.no_grad():
+    with torch.no_grad(), PeakMemory(device) as peak:
         for k in range(warmup):
             draw(k, pose(k))
-        with PeakMemory(device) as peak:
-            for k in range(warmup, warmup + frame_count):
-                _sync(device)
-                start = time.perf_counter()
-                posed = pose(k)
-                _sync(device)
-                middle = time.perf_counter()
-                counts.append(draw(k, posed))
-                _sync(device)
-                posing.append(middle - start)
-                raster.append(time.perf_counter() - middle)
+        for k in range(warmup, warmup + frame_count):
+            _sync(device)
+            start = time.perf_counter()
+            posed = pose(k)
+            _sync(device)
+            middle = time.perf_counter()
+            counts.append(draw(k, posed))
+            _sync(device)
+            posing.append(middle - start)
+            raster.append(time.perf_counter() - middle)
     totals = [a + b for a, b in zip(posing, raster)]
     return SpeedTiming(int(round(statistics.mean(counts))), width, height, frame_count,
                        1000.0 * statistics.median(totals), 1000.0 * statistics.median(posing),
@@ -138,12 +143,13 @@ def time_frames(frame_count: int, warmup: int, pose: Callable[[int], object], dr
 
 def driven_in_body_frame(person: PersonGaussians, motion: BodySequence) -> PersonGaussians:
     """The person's Gaussians driven by ``motion`` in their own body frame (y up, metres, scale 1), frame
-    ids 0..T-1."""
+    ids 0..T-1, frozen for rendering (PersonGaussians.freeze)."""
     rest_pelvis = person.rig.rest_joints[0].double().cpu().numpy()
     orient, transl = upright(motion, rest_pelvis)
     body = BodyParams(np.arange(len(motion)), person.body.betas, orient, motion.body_pose, transl, 1.0,
                       person.body.body_model, np.zeros(len(motion), bool))
-    return PersonGaussians(person.pid, person.model, person.grid, person.rig, body).to(person.pose_offsets.device)
+    driven = PersonGaussians(person.pid, person.model, person.grid, person.rig, body)
+    return driven.to(person.pose_offsets.device).freeze()
 
 
 def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, config: SpeedConfig, sh_degree: int,
@@ -153,16 +159,14 @@ def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, co
     pelvis = driven.rig.rest_joints[0].cpu().double().numpy() + driven.transl.cpu().double().numpy()  # [T, 3]
     total = config.warmup_frames + config.frames
     white = torch.ones(3, device=device)
-    cameras: dict[int, Camera] = {}
+    cameras = [render_camera(orbit_camera(pelvis[k % len(motion)], 360.0 * k / total, 0.0, config.radius_m,
+                                          config.fovy_deg, size), size, size, device) for k in range(total)]
 
     def pose(k: int):
-        step = k % len(motion)
-        cameras[k] = render_camera(orbit_camera(pelvis[step], 360.0 * k / total, 0.0, config.radius_m,
-                                                config.fovy_deg, size), size, size, device)
-        return driven.posed(step, cameras[k].centre, sh_degree)
+        return driven.posed(k % len(motion), cameras[k].centre, sh_degree)
 
     def draw(k: int, posed) -> int:
-        rasterize(cameras.pop(k), means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
+        rasterize(cameras[k], means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
                   colors=posed.colors, background=white, backend=backend)
         return len(posed.means)
 

@@ -5,7 +5,8 @@
   orbit.mp4                 the camera turning once around the people while the video plays
   freeze.mp4                time frozen at the chosen frame, the camera turning around (a turntable)
   person_<pid>.mp4          each person alone in canonical pose, turning (elevation 0)
-  removed_<pid>.mp4         the input view without the chosen person
+  removed_<pid>.mp4         the input view without the chosen person (left); the same with the background no
+                            input frame showed tinted (right, stage 04's never_seen/ masks)
   motion_<pid>.mp4          the chosen person driven by a new motion from the chosen frame, scene frozen
 """
 
@@ -21,7 +22,7 @@ from glimpse.background.stage import render_camera
 from glimpse.eval.config import RenderSetConfig
 from glimpse.errors import GlimpseError
 from glimpse.eval.views import ScoredView
-from glimpse.io.images import frame_files, read_rgb
+from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.video import write_mp4
 from glimpse.prior.orbit import orbit_camera
@@ -30,6 +31,10 @@ from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, people_centre, render_shot, render_video
+
+
+NEVER_SEEN_TINT = (255, 0, 255)  # magenta: the background no input frame showed, in removed_<pid>.mp4
+NEVER_SEEN_TINT_WEIGHT = 0.5
 
 
 def chosen_time(config: RenderSetConfig, run: FinishedRun) -> int:
@@ -64,9 +69,21 @@ def canonical_turntable(person: PersonGaussians, sh_degree: int, frames: int, si
         yield (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
+def with_never_seen(image: np.ndarray, never_seen_dir: Path, frame_id: int) -> np.ndarray:
+    """[H, W, 3] uint8 ``image`` with the pixels of stage 04's never-seen mask of ``frame_id`` tinted (unchanged
+    where the frame has no mask)."""
+    path = never_seen_dir / f"{frame_name(frame_id)}.png"
+    if not path.is_file():
+        return image
+    mask = read_mask(path)[..., None]
+    tinted = (1.0 - NEVER_SEEN_TINT_WEIGHT) * image + NEVER_SEEN_TINT_WEIGHT * np.array(NEVER_SEEN_TINT)
+    return np.where(mask, tinted + 0.5, image).astype(np.uint8)
+
+
 def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[ScoredView], frames_dir: Path,
-                     fps: float, out: Path, device: torch.device) -> dict[str, str]:
-    """Write every video of the set under ``out``; returns file name -> what it shows."""
+                     never_seen_dir: Path, fps: float, out: Path, device: torch.device) -> dict[str, str]:
+    """Write every video of the set under ``out``; returns file name -> what it shows. ``never_seen_dir``: stage
+    04's never_seen/ masks (the removal video tints those pixels)."""
     written: dict[str, str] = {}
     times = sorted(run.cameras)[:: max(config.every, 1)]
     frozen = chosen_time(config, run)
@@ -109,8 +126,11 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
         raise GlimpseError(f"07_eval.renders.person: no person {chosen!r} in the run (people: "
                            f"{', '.join(p.pid for p in run.people)})")
     edits = Edits(frozenset({chosen}))
-    write_mp4(out / f"removed_{chosen}.mp4", render_video(run, [(shot(t), t) for t in times], edits, device), step_fps)
-    written[f"removed_{chosen}.mp4"] = f"input view without {chosen}"
+    removed = (render_shot(run, shot(t), t, edits, device) for t in times)
+    write_mp4(out / f"removed_{chosen}.mp4", (side_by_side(image, with_never_seen(image, never_seen_dir, t))
+                                              for image, t in zip(removed, times)), step_fps)
+    written[f"removed_{chosen}.mp4"] = (f"input view without {chosen} (left); the same with the background no input "
+                                        f"frame showed tinted magenta (right)")
     person = next(p for p in run.people if p.pid == chosen)
     if person.in_frame(frozen):
         motion = motion_from_spec(config.motion, fps, config.motion_seconds)

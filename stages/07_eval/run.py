@@ -1,7 +1,7 @@
 """Stage 07: metrics of stage 06's reconstruction on held-out views, and the standard videos (renders, edits).
 
 Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (the people's mean colours; the ground
-         truth when scoring the input view), 06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz,
+         truth when scoring the input view), 04_bg_pretrain/never_seen/ (tinted in removed_<pid>.mp4), 06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz,
          body.npz, visibility.npz}, background.ply, manifest);
          the scene's eval/ (held-out cameras, ground-truth images and masks).
 Params:  07_eval, body, render, compute (pipeline.yaml).
@@ -75,7 +75,8 @@ def run(ctx: StageContext) -> None:
     if config.renders.enabled:
         heldout = view_set.views if view_set.source == "held-out" else []
         with ctx.timed("renders"):
-            videos = write_render_set(finished, config.renders, heldout, sfm / "frames", scene.fps,
+            videos = write_render_set(finished, config.renders, heldout, sfm / "frames",
+                                      ctx.upstream_dir("04_bg_pretrain") / "never_seen", scene.fps,
                                       ctx.out / "renders", device)
         ctx.formats.update({f"renders/{name}": "mp4 (H.264)" for name in videos})
         ctx.summary["renders"] = videos

@@ -104,9 +104,10 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
   const Inputs in = make_inputs(means2d, conics, opacities, features, extents, tile_offsets, gaussian_ids, width,
                                 height, tile);
   const int64_t C = in.channels;
-  auto image = torch::zeros({height, width, C}, features.options());
-  auto final_T = torch::ones({height, width}, features.options());
-  auto last = torch::zeros({height, width}, tile_offsets.options());
+  // every pixel is written by its tile below: no fill needed
+  auto image = torch::empty({height, width, C}, features.options());
+  auto final_T = torch::empty({height, width}, features.options());
+  auto last = torch::empty({height, width}, tile_offsets.options());
   float* image_ptr = image.data_ptr<float>();
   float* T_ptr = final_T.data_ptr<float>();
   int* last_ptr = last.data_ptr<int>();
@@ -314,10 +315,16 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor c
                                             torch::Tensor v_means2d, torch::Tensor v_conics, torch::Tensor v_depths,
                                             torch::Tensor v_opac_out);
 
+// pose_cpu.cpp
+std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joint_transforms,
+                                        torch::Tensor canonical_inverse, torch::Tensor means, torch::Tensor covariances,
+                                        torch::Tensor sh, int64_t degree, torch::Tensor camera_centre);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
   m.def("project_backward", &project_backward, "EWA projection, backward (CPU)");
   m.def("bin_tiles", &bin_tiles, "Tile binning by counting sort (CPU)");
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
+  m.def("pose_forward", &pose_forward, "Posing a frozen person's Gaussians, forward (CPU)");
 }

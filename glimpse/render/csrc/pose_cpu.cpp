@@ -1,0 +1,158 @@
+// Posing a frozen person's Gaussians for one frame, forward only, on the CPU (rendering finished runs).
+// The maths and conventions are those of glimpse/humans/person.py (PersonGaussians.posed, the reference
+// the tests compare this against): per Gaussian the blended transform A = (sum_j w_j P_j) C^-1 with C^-1
+// cached, means A mu, covariances A Sigma A^T with Sigma the canonical covariance, view
+// directions rotated into the canonical frame by the closest rotation of A (Newton's polar iteration
+// from A / |det A|^(1/3)), colours from spherical harmonics of degree 0-3 in the 3DGS convention.
+// One Gaussian per iteration, independent of the others: parallel over Gaussians, nothing shared.
+#include <torch/extension.h>
+#include <ATen/Parallel.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace {
+
+constexpr int kPolarIterations = 6;    // person.py POLAR_ITERATIONS
+constexpr float kDetFloor = 1e-12f;    // person.py DET_FLOOR
+constexpr float kNormFloor = 1e-12f;   // F.normalize's eps in sh.py
+constexpr float kRgbOffset = 0.5f;     // sh.py RGB_OFFSET
+constexpr int64_t kGrain = 1024;
+
+// sh.py C0..C3
+constexpr float C0 = 0.28209479177387814f;
+constexpr float C1 = 0.4886025119029199f;
+constexpr float C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f, -1.0925484305920792f,
+                         0.5462742152960396f};
+constexpr float C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f, 0.3731763325901154f,
+                         -0.4570457994644658f, 1.445305721320277f, -0.5900435899266435f};
+
+inline float det3(const float* m) {
+  return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+}
+
+// The closest rotation to the 3x3 row-major m (positive determinant), as person.polar_rotation computes it.
+inline void polar(const float* m, float* x) {
+  const float scale = std::cbrt(std::max(std::fabs(det3(m)), kDetFloor));
+  for (int k = 0; k < 9; ++k) x[k] = m[k] / scale;
+  for (int it = 0; it < kPolarIterations; ++it) {
+    const float* r0 = x;
+    const float* r1 = x + 3;
+    const float* r2 = x + 6;
+    float cof[9] = {r1[1] * r2[2] - r1[2] * r2[1], r1[2] * r2[0] - r1[0] * r2[2], r1[0] * r2[1] - r1[1] * r2[0],
+                    r2[1] * r0[2] - r2[2] * r0[1], r2[2] * r0[0] - r2[0] * r0[2], r2[0] * r0[1] - r2[1] * r0[0],
+                    r0[1] * r1[2] - r0[2] * r1[1], r0[2] * r1[0] - r0[0] * r1[2], r0[0] * r1[1] - r0[1] * r1[0]};
+    const float det = std::max(r0[0] * cof[0] + r0[1] * cof[1] + r0[2] * cof[2], kDetFloor);
+    for (int k = 0; k < 9; ++k) x[k] = 0.5f * (x[k] + cof[k] / det);
+  }
+}
+
+// The 3DGS SH basis at unit direction (x, y, z), up to `degree`; returns the number of terms.
+inline int sh_basis(int degree, float x, float y, float z, float* out) {
+  out[0] = C0;
+  if (degree < 1) return 1;
+  out[1] = -C1 * y;
+  out[2] = C1 * z;
+  out[3] = -C1 * x;
+  if (degree < 2) return 4;
+  const float xx = x * x, yy = y * y, zz = z * z;
+  out[4] = C2[0] * x * y;
+  out[5] = C2[1] * y * z;
+  out[6] = C2[2] * (2.0f * zz - xx - yy);
+  out[7] = C2[3] * x * z;
+  out[8] = C2[4] * (xx - yy);
+  if (degree < 3) return 9;
+  out[9] = C3[0] * y * (3.0f * xx - yy);
+  out[10] = C3[1] * x * y * z;
+  out[11] = C3[2] * y * (4.0f * zz - xx - yy);
+  out[12] = C3[3] * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
+  out[13] = C3[4] * x * (4.0f * zz - xx - yy);
+  out[14] = C3[5] * z * (xx - yy);
+  out[15] = C3[6] * x * (xx - 3.0f * yy);
+  return 16;
+}
+
+}  // namespace
+
+// weights [N, J]; joint_transforms [J, 4, 4] (the frame's P_j); canonical_inverse [N, 4, 4] ((sum_j w_j C_j)^-1);
+// means [N, 3] and covariances [N, 3, 3] (canonical); sh [N, K, 3]; degree <= sqrt(K) - 1;
+// camera_centre [3] (world). Returns posed means [N, 3], covariances [N, 3, 3] and colours [N, 3].
+std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joint_transforms,
+                                        torch::Tensor canonical_inverse, torch::Tensor means,
+                                        torch::Tensor covariances, torch::Tensor sh, int64_t degree,
+                                        torch::Tensor camera_centre) {
+  for (const auto* t : {&weights, &joint_transforms, &canonical_inverse, &means, &covariances, &sh,
+                        &camera_centre})
+    TORCH_CHECK(t->dtype() == torch::kFloat32 && t->is_contiguous() && t->device().is_cpu(),
+                "pose_cpu: contiguous float32 CPU tensors expected");
+  const int64_t N = means.size(0), J = weights.size(1), K = sh.size(1);
+  TORCH_CHECK(weights.size(0) == N && joint_transforms.size(0) == J && canonical_inverse.size(0) == N &&
+                  covariances.size(0) == N && sh.size(0) == N && sh.size(2) == 3,
+              "pose_cpu: inconsistent shapes");
+  TORCH_CHECK(degree >= 0 && degree <= 3 && (degree + 1) * (degree + 1) <= K, "pose_cpu: bad SH degree");
+  auto out_means = torch::empty({N, 3}, means.options());
+  auto out_cov = torch::empty({N, 3, 3}, means.options());
+  auto out_rgb = torch::empty({N, 3}, means.options());
+  const float* W = weights.data_ptr<float>();
+  const float* P = joint_transforms.data_ptr<float>();
+  const float* Ci = canonical_inverse.data_ptr<float>();
+  const float* mu = means.data_ptr<float>();
+  const float* Sigma = covariances.data_ptr<float>();
+  const float* S = sh.data_ptr<float>();
+  const float* c = camera_centre.data_ptr<float>();
+  float* om = out_means.data_ptr<float>();
+  float* oc = out_cov.data_ptr<float>();
+  float* orgb = out_rgb.data_ptr<float>();
+
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    for (int64_t n = begin; n < end; ++n) {
+      float B[12] = {0};  // the top three rows of sum_j w_j P_j
+      const float* w = W + n * J;
+      for (int64_t j = 0; j < J; ++j) {
+        if (w[j] == 0.0f) continue;
+        const float* p = P + j * 16;
+        for (int k = 0; k < 12; ++k) B[k] += w[j] * p[k];
+      }
+      const float* ci = Ci + n * 16;
+      float A[12];  // B @ C^-1 (both affine)
+      for (int r = 0; r < 3; ++r) {
+        for (int col = 0; col < 4; ++col)
+          A[4 * r + col] = B[4 * r] * ci[col] + B[4 * r + 1] * ci[4 + col] + B[4 * r + 2] * ci[8 + col];
+        A[4 * r + 3] += B[4 * r + 3];
+      }
+      const float* m = mu + 3 * n;
+      float* pm = om + 3 * n;
+      for (int r = 0; r < 3; ++r) pm[r] = A[4 * r] * m[0] + A[4 * r + 1] * m[1] + A[4 * r + 2] * m[2] + A[4 * r + 3];
+      const float* sigma = Sigma + 9 * n;
+      float M[9];  // A_3x3 @ Sigma
+      for (int r = 0; r < 3; ++r)
+        for (int col = 0; col < 3; ++col)
+          M[3 * r + col] = A[4 * r] * sigma[col] + A[4 * r + 1] * sigma[3 + col] + A[4 * r + 2] * sigma[6 + col];
+      float* cov = oc + 9 * n;  // M @ A_3x3^T
+      for (int r = 0; r < 3; ++r)
+        for (int col = 0; col < 3; ++col)
+          cov[3 * r + col] = M[3 * r] * A[4 * col] + M[3 * r + 1] * A[4 * col + 1] + M[3 * r + 2] * A[4 * col + 2];
+
+      float d[3] = {pm[0] - c[0], pm[1] - c[1], pm[2] - c[2]};
+      if (degree > 0) {  // into the canonical frame: R^T d
+        const float linear[9] = {A[0], A[1], A[2], A[4], A[5], A[6], A[8], A[9], A[10]};
+        float R[9];
+        polar(linear, R);
+        const float e[3] = {R[0] * d[0] + R[3] * d[1] + R[6] * d[2], R[1] * d[0] + R[4] * d[1] + R[7] * d[2],
+                            R[2] * d[0] + R[5] * d[1] + R[8] * d[2]};
+        d[0] = e[0], d[1] = e[1], d[2] = e[2];
+      }
+      const float norm = std::max(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), kNormFloor);
+      float basis[16];
+      const int terms = sh_basis(static_cast<int>(degree), d[0] / norm, d[1] / norm, d[2] / norm, basis);
+      const float* s = S + n * K * 3;
+      for (int ch = 0; ch < 3; ++ch) {
+        float v = 0.0f;
+        for (int k = 0; k < terms; ++k) v += basis[k] * s[3 * k + ch];
+        orgb[3 * n + ch] = std::max(v + kRgbOffset, 0.0f);
+      }
+    }
+  });
+  return {out_means, out_cov, out_rgb};
+}
