@@ -7,7 +7,7 @@ the body's grid as stage 06 does; driven by the built-in walk, the camera circli
 Baseline, same run: the same Gaussians rasterized in canonical pose with no posing (the renderer's
 floor), so the ratio is what posing costs. The scene: SCENE_PEOPLE such people standing 1.5 m apart
 and SCENE_BACKGROUND background Gaussians on the walls and floor of a 6 x 3 x 6 m room, seen from
-the room's corner at SCENE_SIZES.
+eye height by the front wall at SCENE_SIZES.
 
     .venv/bin/python bench/speed.py [--quick] [--run OUT/demo]   (--run: a finished run's speed.json tables too)
 """
@@ -82,22 +82,21 @@ def surface_person(body_model: BodyModel, body: BodyConfig, count: int, rng: np.
 
 
 def room_background(count: int, rng: np.random.Generator) -> GaussianModel:
-    """``count`` Gaussians on the floor and four walls of the room, random colours, flat-ish."""
+    """``count`` isotropic Gaussians (BACKGROUND_SCALE_M) on the floor and four walls of the room, random colours."""
     width, height, depth = ROOM_M
-    planes = rng.integers(0, 5, count)
+    plane = rng.integers(0, 5, count)  # 0 floor, 1-2 side walls (x = -+width/2), 3-4 back and front (z = -+depth/2)
     u, v = rng.uniform(0, 1, count), rng.uniform(0, 1, count)
-    x, y, z = (u - 0.5) * width, v * height, (v - 0.5) * depth
-    points = np.stack([
-        np.where(planes == 0, x, np.where(planes < 3, (planes - 1.5) * width, x)),
-        np.where(planes == 0, 0.0, y),
-        np.where(planes == 0, (v - 0.5) * depth, np.where(planes < 3, (u - 0.5) * depth, (planes - 3.5) * depth)),
-    ], axis=1)
+    side = (plane == 1) | (plane == 2)
+    x = np.where(side, (plane - 1.5) * width, (u - 0.5) * width)
+    y = np.where(plane == 0, 0.0, v * height)
+    z = np.select([plane == 0, side], [(v - 0.5) * depth, (u - 0.5) * depth], (plane - 3.5) * depth)
+    points = np.stack([x, y, z], axis=1)
     return GaussianModel.from_points(torch.as_tensor(points, dtype=torch.float32),
                                      torch.as_tensor(rng.uniform(0.2, 0.8, (count, 3)), dtype=torch.float32),
                                      torch.full((count,), BACKGROUND_SCALE_M), OPACITY, SH_DEGREE)
 
 
-def corner_camera(width: int, height: int) -> PinholeCamera:
+def wall_camera(width: int, height: int) -> PinholeCamera:
     """A camera at eye height near the room's front wall, looking at the room's centre."""
     position = np.array([0.0, 1.6, 0.45 * ROOM_M[2]])
     target = np.array([0.0, 1.0, 0.0])
@@ -167,7 +166,7 @@ def main() -> None:
         baseline = canonical_baseline(person, size, config)
         print(row("canonical, no posing (baseline)", baseline), flush=True)
         timing = time_novel_pose(person, motion, size, config, SH_DEGREE, "cpu", device)
-        print(row(f"person, novel pose", timing, baseline), flush=True)
+        print(row("person, novel pose", timing, baseline), flush=True)
     if not args.quick:
         print(f"\nwhole scene: {SCENE_PEOPLE} such people and {SCENE_BACKGROUND:,} background Gaussians, "
               f"{SCENE_FRAMES} frames\n")
@@ -177,7 +176,7 @@ def main() -> None:
                   for k in range(SCENE_PEOPLE)]
         background = room_background(SCENE_BACKGROUND, rng)
         for width, height in SCENE_SIZES:
-            run = FinishedRun(Path("."), width, height, {0: corner_camera(width, height)}, background, people,
+            run = FinishedRun(Path("."), width, height, {0: wall_camera(width, height)}, background, people,
                               body_model, RenderConfig("cpu", SH_DEGREE, False))
             timing = time_scene(run, [0] * SCENE_FRAMES, config.warmup_frames, device)
             print(row("whole scene", timing), flush=True)

@@ -211,6 +211,7 @@ def test_stage07_writes_the_standard_videos(tiny):
         assert len(video) == count, name
     width = read_cameras_json(run_dir / "01_sfm" / "cameras.json")[0]
     assert read_mp4(renders / "input.mp4").shape[2] >= 2 * width  # render beside the input frame
+    assert read_mp4(renders / "removed_p0.mp4").shape[2] == 2 * width  # beside it, the never-seen pixels tinted
     moved = read_mp4(renders / "motion_p0.mp4").astype(int)
     assert np.abs(moved[-1] - moved[0]).max() > 50  # the driven person walked
 

@@ -114,3 +114,18 @@ def test_a_new_motion_starts_where_the_person_stands_and_heads_their_way():
         atol=1e-9)
     with pytest.raises(GlimpseError, match="no body at frame 9"):
         retarget(walk, _standing(), 9, body_model, np.arange(3))
+
+
+def test_the_removal_video_tints_the_never_seen_background(tmp_path):
+    from glimpse.io.images import write_png
+    from glimpse.replay.standard import NEVER_SEEN_TINT, with_never_seen
+
+    image = np.full((4, 6, 3), 100, np.uint8)
+    mask = np.zeros((4, 6), bool)
+    mask[1:3, 2:5] = True
+    write_png(tmp_path / "000007.png", mask.astype(np.uint8) * 255)
+    tinted = with_never_seen(image, tmp_path, 7)
+    assert (tinted[~mask] == 100).all()
+    expected = np.round(0.5 * 100 + 0.5 * np.array(NEVER_SEEN_TINT))
+    assert (tinted[mask] == expected).all()
+    assert (with_never_seen(image, tmp_path, 8) == image).all()  # no mask for that frame: unchanged

@@ -1,8 +1,9 @@
 """Stage 07: metrics of stage 06's reconstruction on held-out views, and the standard videos (renders, edits).
 
 Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (the people's mean colours; the ground
-         truth when scoring the input view), 04_bg_pretrain/never_seen/ (tinted in removed_<pid>.mp4), 06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz,
-         body.npz, visibility.npz}, background.ply, manifest);
+         truth when scoring the input view), 04_bg_pretrain/never_seen/ (tinted in removed_<pid>.mp4),
+         06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz, body.npz, visibility.npz}, background.ply,
+         manifest);
          the scene's eval/ (held-out cameras, ground-truth images and masks).
 Params:  07_eval, body, render, compute (pipeline.yaml).
 Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
