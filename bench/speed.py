@@ -112,7 +112,7 @@ def wall_camera(width: int, height: int) -> PinholeCamera:
 def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) -> SpeedTiming:
     """The same Gaussians rasterized in canonical pose from the same circling camera, with no posing."""
     from glimpse.background.stage import render_camera
-    from glimpse.prior.orbit import orbit_camera
+    from glimpse.prior.orbit import turn_cameras
     from glimpse.render import rasterize
 
     device = torch.device("cpu")
@@ -120,8 +120,8 @@ def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) 
     total = config.warmup_frames + config.frames
     inputs = person.model.render_inputs(SH_DEGREE)
 
-    cameras = [render_camera(orbit_camera(centre, 360.0 * k / total, 0.0, config.radius_m, config.fovy_deg, size),
-                             size, size, device) for k in range(total)]
+    cameras = [render_camera(pinhole, size, size, device)
+               for pinhole in turn_cameras(np.tile(centre, (total, 1)), config.radius_m, config.fovy_deg, size)]
 
     def draw(k: int, camera) -> int:
         rasterize(camera, **inputs, background=torch.ones(3))

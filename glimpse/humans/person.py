@@ -167,10 +167,14 @@ class PersonGaussians(nn.Module):
         row = self.row_of_frame[int(frame_id)]
         return self.base_pose[row] + self.pose_offsets[row]
 
+    def frame_transforms(self, frame_id: int) -> Tensor:
+        """[24, 4, 4] the joints' skinning transforms in ``frame_id`` (refined pose, scale, translation)."""
+        row = self.row_of_frame[int(frame_id)]
+        return joint_transforms(self.rig, self.pose(frame_id), self.transl[row], self.scale)
+
     def blended_transforms(self, frame_id: int) -> Tensor:
         """[N, 4, 4] canonical-to-world transform of each Gaussian in ``frame_id``."""
-        row = self.row_of_frame[int(frame_id)]
-        posed = joint_transforms(self.rig, self.pose(frame_id), self.transl[row], self.scale)
+        posed = self.frame_transforms(frame_id)
         weights = self.grid.lookup(self.model.means)
         return canonical_to_posed(weights, posed, self.rig.canonical_transforms)
 
@@ -189,8 +193,7 @@ class PersonGaussians(nn.Module):
         """posed() from the frozen cache: the C++ kernel on CPU when it builds, else PyTorch (same maths)."""
         from glimpse.render import composite_cpu
 
-        row = self.row_of_frame[int(frame_id)]
-        posed = joint_transforms(self.rig, self.pose(frame_id), self.transl[row], self.scale)
+        posed = self.frame_transforms(frame_id)
         cache, means = self.frozen, self.model.means.detach()
         if means.device.type == "cpu" and composite_cpu.available():
             means, covariances, colours = composite_cpu.extension().pose_forward(

@@ -51,6 +51,13 @@ def orbit_camera(centre: np.ndarray, azimuth_deg: float, elevation_deg: float, r
     return PinholeCamera(K, R, -R @ position)
 
 
+def turn_cameras(centres: np.ndarray, radius: float, fovy_deg: float, size: int) -> list[PinholeCamera]:
+    """One camera per row of ``centres [K, 3]`` (canonical frame, y up), the k-th at azimuth 360 k / K (0 = the
+    front), elevation 0, ``radius`` from its centre: one turn around a body (turntables, speed timings)."""
+    return [orbit_camera(centre, 360.0 * k / len(centres), 0.0, radius, fovy_deg, size)
+            for k, centre in enumerate(centres)]
+
+
 def sample_orbit_views(centre: np.ndarray, count: int, config: OrbitConfig, rng: np.random.Generator) -> list[OrbitView]:
     """``count`` cameras with azimuth U[-180, 180) and elevation U[config.elevation_deg)."""
     low, high = config.elevation_deg

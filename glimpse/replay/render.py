@@ -12,7 +12,7 @@ import torch
 from glimpse.background.stage import render_camera
 from glimpse.body.params import BodyParams
 from glimpse.errors import GlimpseError
-from glimpse.humans.person import PersonGaussians, joint_transforms
+from glimpse.humans.person import PersonGaussians
 from glimpse.joint.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.replay.cameras import Shot
 from glimpse.replay.finished import FinishedRun
@@ -40,9 +40,8 @@ class Edits:
 
 def pelvis(person: PersonGaussians, frame_id: int) -> np.ndarray:
     """(3,) the person's pelvis in the world at ``frame_id`` (refined pose)."""
-    row = person.row_of_frame[int(frame_id)]
     with torch.no_grad():
-        transforms = joint_transforms(person.rig, person.pose(frame_id), person.transl[row], person.scale)
+        transforms = person.frame_transforms(frame_id)
     return transforms[0, :3, 3].cpu().double().numpy()
 
 
@@ -89,6 +88,11 @@ def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) ->
                           torch.cat([first.groups, groups]), rows)
 
 
+def rgb_to_uint8(rgb: torch.Tensor) -> np.ndarray:
+    """[H, W, 3] float colours in [0, 1] (clamped) -> [H, W, 3] uint8, rounded."""
+    return (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
 @torch.no_grad()
 def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, device: torch.device,
                 video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
@@ -102,7 +106,7 @@ def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, devic
     if driven:
         gaussians = _joined(gaussians, frame_gaussians(camera, video_index, driven, degree), len(people))
     rgb = render_frame(camera, gaussians, len(people) + len(driven), run.render, torch.zeros(3, device=device)).rgb
-    return (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+    return rgb_to_uint8(rgb)
 
 
 def render_video(run: FinishedRun, frames: Sequence[tuple[Shot, int]], edits: Edits, device: torch.device

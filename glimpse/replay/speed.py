@@ -30,11 +30,12 @@ from glimpse.body.params import BodyParams
 from glimpse.eval.config import SpeedConfig
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.compose import frame_gaussians, render_frame
-from glimpse.prior.orbit import orbit_camera
+from glimpse.prior.orbit import turn_cameras
 from glimpse.render import rasterize
 from glimpse.render.rasterize import choose_backend
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, upright
+from glimpse.replay.render import rgb_to_uint8
 
 SPEED_FORMAT = "glimpse-speed/1"
 MB = 2.0**20
@@ -159,8 +160,8 @@ def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, co
     pelvis = driven.rig.rest_joints[0].cpu().double().numpy() + driven.transl.cpu().double().numpy()  # [T, 3]
     total = config.warmup_frames + config.frames
     white = torch.ones(3, device=device)
-    cameras = [render_camera(orbit_camera(pelvis[k % len(motion)], 360.0 * k / total, 0.0, config.radius_m,
-                                          config.fovy_deg, size), size, size, device) for k in range(total)]
+    cameras = [render_camera(pinhole, size, size, device) for pinhole in
+               turn_cameras(pelvis[np.arange(total) % len(motion)], config.radius_m, config.fovy_deg, size)]
 
     def pose(k: int):
         return driven.posed(k % len(motion), cameras[k].centre, sh_degree)
@@ -174,8 +175,8 @@ def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, co
 
 
 def time_scene(run: FinishedRun, frame_ids: Sequence[int], warmup: int, device: torch.device) -> SpeedTiming:
-    """Frames per second of the whole scene of ``run`` (drawn as render_shot draws it) from its input cameras at ``frame_ids``
-    (cycled through for the warm-up frames first)."""
+    """Frames per second of the whole scene of ``run`` from its input cameras at ``frame_ids`` (cycled through
+    for the warm-up frames first), drawn as render_shot draws it, in two timed parts."""
     degree = run.render.sh_degree
     black = torch.zeros(3, device=device)
     ids = list(frame_ids)
@@ -189,8 +190,7 @@ def time_scene(run: FinishedRun, frame_ids: Sequence[int], warmup: int, device: 
         return frame_gaussians(cameras[fid], fid, run.people, degree, run.background, degree)
 
     def draw(k: int, gaussians) -> int:
-        rgb = render_frame(cameras[frame(k)], gaussians, len(run.people), run.render, black).rgb
-        (rgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8).cpu()
+        rgb_to_uint8(render_frame(cameras[frame(k)], gaussians, len(run.people), run.render, black).rgb)
         return len(gaussians.means)
 
     return time_frames(len(ids), warmup, pose, draw, device, run.width, run.height)
@@ -217,13 +217,14 @@ def speed_report(run: FinishedRun, config: SpeedConfig, device: torch.device,
             progress(f"speed: {person.pid} at {size}px: {timings[str(size)]['fps']:.1f} fps")
         people[person.pid] = {"gaussians": len(person.model), "model_mb": round(model_megabytes(person), 3),
                               "novel_pose": timings}
-    scene = time_scene(run, evenly_spread(sorted(run.cameras), config.scene_frames), config.warmup_frames, device)
+    scene_frames = evenly_spread(sorted(run.cameras), config.scene_frames)
+    scene = time_scene(run, scene_frames, config.warmup_frames, device)
     progress(f"speed: whole scene at {run.width}x{run.height}: {scene.fps:.1f} fps")
     threads = torch.get_num_threads() if device.type == "cpu" else None
     return {"format": SPEED_FORMAT, "backend": backend, "device": device_name(device), "threads": threads,
             "people": people, "scene": scene.as_dict(),
             "protocol": PROTOCOL.format(motion=config.motion, radius_m=config.radius_m, fovy_deg=config.fovy_deg,
-                                        scene_frames=len(evenly_spread(sorted(run.cameras), config.scene_frames)),
+                                        scene_frames=len(scene_frames),
                                         frames=config.frames, warmup=config.warmup_frames)}
 
 

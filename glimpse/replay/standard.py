@@ -25,12 +25,12 @@ from glimpse.eval.views import ScoredView
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.video import write_mp4
-from glimpse.prior.orbit import orbit_camera
+from glimpse.prior.orbit import turn_cameras
 from glimpse.render import rasterize
 from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
-from glimpse.replay.render import Edits, people_centre, render_shot, render_video
+from glimpse.replay.render import Edits, people_centre, render_shot, render_video, rgb_to_uint8
 
 
 NEVER_SEEN_TINT = (255, 0, 255)  # magenta: the background no input frame showed, in removed_<pid>.mp4
@@ -62,11 +62,10 @@ def canonical_turntable(person: PersonGaussians, sh_degree: int, frames: int, si
     spread over a turn (0 = the front), elevation 0, ``radius_m`` from the body's centre, on white."""
     points = person.rig.canonical_vertices.cpu().numpy()
     centre = 0.5 * (points.min(0) + points.max(0))
-    for k in range(frames):
-        pinhole = orbit_camera(centre, 360.0 * k / frames, 0.0, radius_m, fovy_deg, size)
+    for pinhole in turn_cameras(np.tile(centre, (frames, 1)), radius_m, fovy_deg, size):
         rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(sh_degree),
                         background=torch.ones(3, device=device), backend=backend).rgb
-        yield (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+        yield rgb_to_uint8(rgb)
 
 
 def with_never_seen(image: np.ndarray, never_seen_dir: Path, frame_id: int) -> np.ndarray:
