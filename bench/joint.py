@@ -8,7 +8,8 @@ cameras (ground truth rendered by the mesh renderer): humans-only PSNR / SSIM / 
 protocol) and the same restricted to the never-seen pixels, each beside the two baselines (empty
 render, bodies in mean colour); per person inside their own masks; the full composite; and the
 hedgehog count (Gaussians with a largest scale above HEDGEHOG_SCALE_M, or a largest / middle
-scale above HEDGEHOG_RATIO). --pictures DIR saves each person's canonical turntable per prior.
+scale above HEDGEHOG_RATIO) and each person's canonical holes (glimpse.eval.coverage). --pictures
+DIR saves each person's canonical turntable per prior.
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, per prior, as a ratio to one forward+backward render of the same
@@ -17,12 +18,13 @@ the prior's share of an iteration is 1 - (ms per iteration with prior none) / (m
 
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
                                     [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
-                                    [--pictures DIR]
+                                    [--pictures DIR] [--keep DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import tempfile
@@ -37,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.background.stage import render_camera  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.eval.coverage import CoverageConfig, canonical_hole_share  # noqa: E402
 from glimpse.fixtures.scenes import make_scene  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
@@ -112,6 +115,16 @@ def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
     return total, large, needles
 
 
+def hole_shares(run_dir: Path) -> str:
+    """Per person, the % of their canonical body silhouette their Gaussians leave see-through (alpha < 0.5,
+    glimpse.eval.coverage), e.g. "p0 2.4, p1 0.8"."""
+    model = BodyModel.from_file(BODY_MODEL)
+    people = load_trained_people(run_dir / "06_joint_opt" / "humans", model)
+    faces, device = model.faces.numpy(), torch.device("cpu")
+    return ", ".join(f"{p.pid} {100 * canonical_hole_share(p, faces, CoverageConfig(), RENDER.backend, device):.1f}"
+                     for p in people)
+
+
 def turntables(run_dir: Path, picture: Path) -> None:
     """Every person's canonical Gaussians from TURNTABLE_VIEWS azimuths (elevation 0), one row per person."""
     people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
@@ -129,8 +142,8 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
     print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 | "
           "per person PSNR (own mask) | composite PSNR | input-view PSNR, people px | Gaussians per person | "
-          f"> {HEDGEHOG_SCALE_M * 100:g} cm / ratio > {HEDGEHOG_RATIO:g} | it/s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          f"> {HEDGEHOG_SCALE_M * 100:g} cm / ratio > {HEDGEHOG_RATIO:g} | canonical holes % | it/s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     baselines = []
     for scenario in scenarios:
         for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors):
@@ -149,7 +162,7 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
             print(f"| {scenario} | {report['prior']} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
                   f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {never} | {per_person} | "
                   f"{composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | {large} / {needles} of {total} | "
-                  f"{report['iterations_per_s']:.2f} |", flush=True)
+                  f"{hole_shares(run_dir)} | {report['iterations_per_s']:.2f} |", flush=True)
             if prior == priors[0]:
                 baselines.append((scenario, humans[1:], unseen[1:]))
             if pictures is not None:
@@ -196,10 +209,14 @@ def main() -> int:
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
                         help="stage 04's schedule_scale in the quality runs (default: pipeline.yaml's)")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="run in this folder and keep it (default: a temporary folder, removed at the end)")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
     priors = tuple(args.priors.split(","))
-    with tempfile.TemporaryDirectory() as tmp:
+    if args.keep is not None:
+        args.keep.mkdir(parents=True, exist_ok=True)
+    with contextlib.nullcontext(str(args.keep)) if args.keep is not None else tempfile.TemporaryDirectory() as tmp:
         if args.quality:
             print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
             quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,

@@ -1,6 +1,7 @@
 """The surface prior and what it stands on: the body's mirror map, harmonic completion (against the
 closed-form interpolation on a path), vertex visibility (front/back, people hiding people, static
-occluders), orbit cameras, the never-seen pixels of a view, and each loss term doing its job."""
+occluders), orbit cameras, the never-seen pixels of a view, holes in a canonical person, and each loss term
+doing its job."""
 
 from __future__ import annotations
 
@@ -18,12 +19,13 @@ from glimpse.body.params import BodyParams
 from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
 from glimpse.cameras.model import PinholeCamera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.eval.coverage import CoverageConfig, canonical_hole_share
 from glimpse.eval.never_seen import PosedBodies, flat_bodies
 from glimpse.eval.views import ScoredView
 from glimpse.humans.person import initial_person
 from glimpse.humans.visibility import BodyVisibility, VisibilityConfig, body_visibility, vertex_normals
 from glimpse.prior import PriorContext, make_prior
-from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means, part_parents
+from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.prior.orbit import orbit_camera
 from glimpse.render.config import RenderConfig
@@ -63,7 +65,12 @@ def test_the_mirror_map_is_an_involution_onto_reflected_vertices(body_model):
     assert (template[mirror[left], 0] < -0.04).all()
 
 
-def test_harmonic_fill_interpolates_linearly_along_a_path():
+def held(known: np.ndarray) -> np.ndarray:
+    """Confidences that hold the known vertices exactly (screened_fill's hard constraints)."""
+    return np.where(known, np.inf, 0.0)
+
+
+def test_the_fill_interpolates_linearly_along_a_path():
     """On a path graph the harmonic extension between two known ends is the straight line between them."""
     count = 11
     edges = np.stack([np.arange(count - 1), np.arange(1, count)], 1)
@@ -72,7 +79,7 @@ def test_harmonic_fill_interpolates_linearly_along_a_path():
     values[0], values[-1] = [1.0, 0.0], [3.0, 10.0]
     known = np.zeros(count, bool)
     known[[0, -1]] = True
-    filled = harmonic_fill(values, known, graph)
+    filled = screened_fill(values, held(known), graph)
     line = np.linspace(0, 1, count)[:, None] * (values[-1] - values[0]) + values[0]
     np.testing.assert_allclose(filled, line, atol=1e-5)
 
@@ -83,7 +90,7 @@ def test_a_strong_mirror_edge_carries_a_seen_colour_across():
     mirror = np.array([0, 2, 1])
     values = np.array([[1.0, 0, 0], [0, 0, 0], [0, 0, 1.0]])
     known = np.array([True, False, True])
-    filled = harmonic_fill(values, known, body_graph(edges, mirror, 9.0, 3))
+    filled = screened_fill(values, held(known), body_graph(edges, mirror, 9.0, 3))
     np.testing.assert_allclose(filled[1], [0.1, 0.0, 0.9], atol=1e-5)
 
 
@@ -98,10 +105,29 @@ def test_far_from_anything_seen_a_vertex_settles_on_its_parts_seen_colour():
     groups = part_groups(np.r_[0, 1, np.ones(count - 2, int)], np.arange(count))
     anchors = part_means(values, known, groups)  # part 1's seen mean is vertex 1's 3.0
     assert anchors[0, 0] == 1.0 and (anchors[1:, 0] == 3.0).all()
-    filled = harmonic_fill(values, known, graph, anchors, anchor_weight=0.5)
+    filled = screened_fill(values, held(known), graph, anchors, anchor_weight=0.5)
     assert abs(filled[-1, 0] - 3.0) < 1e-3 and filled[1, 0] == 3.0
     mirrored = part_groups(np.array([0, 1, 2, 3]), np.array([1, 0, 3, 2]))
     assert mirrored.tolist() == [0, 0, 2, 2]  # a part and its mirror form one group
+
+
+def test_a_faint_vertex_yields_to_its_neighbours_and_a_firm_one_keeps_its_colour():
+    """Path 0-1-2: the ends held at 0 and 2, the middle's data 10 with confidence c. The energy
+    (x - 0)^2 + (x - 2)^2 + c (x - 10)^2 is least at x = (2 + 10 c) / (2 + c)."""
+    graph = body_graph(np.array([[0, 1], [1, 2]]), np.arange(3), 1.0, 3)
+    values = np.array([[0.0], [10.0], [2.0]])
+    for confidence in (0.01, 1.0, 1000.0):
+        filled = screened_fill(values, np.array([np.inf, confidence, np.inf]), graph)
+        assert filled[1, 0] == pytest.approx((2 + 10 * confidence) / (2 + confidence), rel=1e-9)
+    assert filled[[0, 2], 0].tolist() == [0.0, 2.0]
+
+
+def test_part_means_weigh_each_vertex_by_its_weight():
+    values = np.array([[0.0], [4.0], [9.0]])
+    known = np.array([True, True, False])
+    groups = np.zeros(3, int)
+    assert part_means(values, known, groups)[2, 0] == 2.0
+    assert part_means(values, known, groups, weights=np.array([1.0, 3.0, 100.0]))[2, 0] == 3.0
 
 
 def test_a_part_never_seen_takes_its_nearest_seen_ancestors_colour():
@@ -124,7 +150,7 @@ def test_a_part_never_seen_takes_its_nearest_seen_ancestors_colour():
 def test_an_island_without_known_vertices_takes_the_known_mean():
     graph = coo_matrix((np.ones(2), ([2, 3], [3, 2])), shape=(4, 4)).tocsr()  # 0, 1 isolated and known
     values = np.array([[0.0], [1.0], [7.0], [7.0]])
-    filled = harmonic_fill(values, np.array([True, True, False, False]), graph)
+    filled = screened_fill(values, held(np.array([True, True, False, False])), graph)
     np.testing.assert_allclose(filled[2:], 0.5, atol=1e-4)
 
 
@@ -200,6 +226,21 @@ def test_never_seen_pixels_cover_the_back_seen_from_behind_and_nothing_from_the_
     assert from_behind.never_seen.sum() > 0.9 * (from_behind.owner == 0).sum()
     flat = flat_bodies(from_behind, [np.array([0.2, 0.4, 0.6])])
     assert np.allclose(flat[from_behind.owner == 0], [0.2, 0.4, 0.6]) and (flat[from_behind.owner < 0] == 0).all()
+
+
+# --- holes in the canonical person -------------------------------------------------------------------------
+
+def test_a_person_covering_their_body_has_no_holes_and_a_faded_half_shows_as_holes(body_model):
+    person = initial_person("p0", body_model, _standing(), 30.0, BODY.skinning, 0.5, 0.9, 3, 0)
+    config = CoverageConfig(views=4, size_px=96)
+    faces = body_model.faces.numpy()
+    covered = canonical_hole_share(person, faces, config, RENDER.backend, torch.device("cpu"))
+    with torch.no_grad():
+        person.model.opacity_logits[person.model.means[:, 0] > 0.0] = -10.0  # the body's left half fades away
+    faded = canonical_hole_share(person, faces, config, RENDER.backend, torch.device("cpu"))
+    assert covered < 0.02
+    # about half of the front and back views; from the sides the other half shows through (but not the arm)
+    assert 0.15 < faded < 0.35
 
 
 # --- the surface prior -------------------------------------------------------------------------------------

@@ -1,18 +1,20 @@
 """Completing a per-vertex quantity over the body surface from the vertices where it is known.
 
 The body graph is the mesh's edges plus an edge from each vertex to its left-right mirror
-(glimpse.body.symmetry), weighted ``mirror_weight`` against 1 for a mesh edge. Unknown values
-minimise the graph's Dirichlet energy plus a pull of weight ``anchor_weight`` towards an anchor
-value per vertex (screened harmonic extension): an unknown vertex takes the weighted mean of its
-neighbours and its anchor, so a colour seen on one side crosses to the mirror side and spreads
-along the surface, while far from anything seen it settles on its anchor (the seen mean of its
-body part, or of the nearest ancestor part the views saw, :func:`part_means`).
+(glimpse.body.symmetry), weighted ``mirror_weight`` against 1 for a mesh edge. The completed values
+minimise the graph's Dirichlet energy plus, at each vertex with data, its confidence times the
+squared distance to its data, and at each vertex without, a pull of weight ``anchor_weight``
+towards an anchor value (a screened Poisson problem, :func:`screened_fill`): an unknown vertex
+takes the weighted mean of its neighbours and its anchor, so a colour seen on one side crosses to
+the mirror side and spreads along the surface, while far from anything seen it settles on its
+anchor (the seen mean of its body part, or of the nearest ancestor part the views saw,
+:func:`part_means`). Data held by little opacity (a few faint Gaussians) yields to its neighbours.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix, identity
+from scipy.sparse import coo_matrix, diags
 from scipy.sparse.linalg import spsolve
 
 MIN_ANCHOR = 1e-6  # smallest pull towards the anchors (keeps vertices cut off from every known one defined)
@@ -50,17 +52,25 @@ def part_parents(labels: np.ndarray, groups: np.ndarray, joint_parents: np.ndarr
 
 
 def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray,
-               parent_group: np.ndarray | None = None, min_share: float = 0.0) -> np.ndarray:
-    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group, if at least
-    ``min_share`` of the group's vertices are known (a few stray vertices are not a part's colour); else that
-    of its nearest ancestor group that qualifies (``parent_group``, :func:`part_parents`: unseen shins take the
-    thighs' colour), else the mean over every known vertex (zeros when nothing is known)."""
-    overall = values[known].mean(axis=0) if known.any() else np.zeros(values.shape[1])
+               parent_group: np.ndarray | None = None, min_share: float = 0.0,
+               weights: np.ndarray | None = None) -> np.ndarray:
+    """[V, C]: at each vertex, the mean of ``values [V, C]`` over the known vertices of its group (weighted by
+    ``weights [V]``, default equal), if at least ``min_share`` of the group's vertices are known (a few stray
+    vertices are not a part's colour); else that of its nearest ancestor group that qualifies (``parent_group``,
+    :func:`part_parents`: unseen shins take the thighs' colour), else the mean over every known vertex (zeros
+    when nothing is known)."""
+    weights = np.ones(len(values)) if weights is None else np.asarray(weights, np.float64)
+
+    def mean(rows: np.ndarray) -> np.ndarray:
+        total = weights[rows].sum()
+        return (values[rows] * weights[rows, None]).sum(0) / total if total > 0 else values[rows].mean(axis=0)
+
+    overall = mean(known) if known.any() else np.zeros(values.shape[1])
     means = {}
     for group in np.unique(groups[known]):
         members = groups == group
         if (members & known).sum() >= min_share * members.sum():
-            means[int(group)] = values[members & known].mean(axis=0)
+            means[int(group)] = mean(members & known)
     anchors = np.tile(overall, (len(values), 1))
     for group in np.unique(groups):
         source = int(group)
@@ -73,23 +83,31 @@ def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray,
     return anchors
 
 
-def harmonic_fill(values: np.ndarray, known: np.ndarray, graph, anchors: np.ndarray | None = None,
+def screened_fill(values: np.ndarray, confidence: np.ndarray, graph, anchors: np.ndarray | None = None,
                   anchor_weight: float = 0.0) -> np.ndarray:
-    """values [V, C] (read where ``known [V]`` is True) -> [V, C] with the unknown rows replaced by the
-    screened harmonic extension on ``graph`` [V, V] (body_graph), pulled towards ``anchors [V, C]`` (default:
-    the known mean) with ``anchor_weight``. With nothing known the values come back unchanged."""
-    if known.all() or not known.any():
+    """values [V, C] (read where ``confidence [V]`` > 0) -> [V, C] minimising, over every vertex not held
+    exactly (``confidence`` inf), the graph's Dirichlet energy on ``graph`` [V, V] (body_graph) plus
+    ``confidence x (x - value)^2`` at the vertices with data and ``anchor_weight x (x - anchor)^2`` at those
+    without (``anchors [V, C]``, default: the mean of the data, a held vertex weighing 1 and the others their
+    confidence). A vertex whose data is
+    weak (little opacity behind its colour) is smoothed by its neighbours; with infinite confidence this is
+    the screened harmonic extension from the known vertices. With no data the values come back unchanged."""
+    held = np.isinf(confidence)
+    has_data = held | (confidence > 0)
+    if held.all() or not has_data.any():
         return values.copy()
-    unknown = ~known
     degree = np.asarray(graph.sum(axis=1)).ravel()
     laplacian = (coo_matrix((degree, (np.arange(len(degree)), np.arange(len(degree)))), shape=graph.shape)
                  - graph).tocsr()
     if anchors is None:
-        anchors = np.tile(values[known].mean(axis=0), (len(values), 1))
-    pull = max(anchor_weight, MIN_ANCHOR)
-    system = laplacian[unknown][:, unknown] + pull * identity(int(unknown.sum()), format="csr")
-    right = -(laplacian[unknown][:, known] @ values[known]) + pull * anchors[unknown]
+        weight = np.where(held, 1.0, np.where(has_data, confidence, 0.0))
+        anchors = np.tile((values * weight[:, None]).sum(0) / weight.sum(), (len(values), 1))
+    free = ~held
+    data = np.where(has_data, np.where(held, 0.0, confidence), 0.0)[free]
+    pull = np.where(has_data[free], 0.0, max(anchor_weight, MIN_ANCHOR))
+    system = laplacian[free][:, free] + diags(data + pull, format="csr")
+    right = (-(laplacian[free][:, held] @ values[held]) + data[:, None] * values[free]
+             + pull[:, None] * anchors[free])
     filled = values.copy()
-    solution = spsolve(system.tocsc(), right)
-    filled[unknown] = solution.reshape(int(unknown.sum()), -1)
+    filled[free] = spsolve(system.tocsc(), right).reshape(int(free.sum()), -1)
     return filled

@@ -25,6 +25,7 @@ class SurfacePriorConfig:
     mirror_weight: float
     part_anchor: float
     part_min_seen: float
+    colour_confidence: float
     colour_max_angle_deg: float
     colour: float
     view_dependent: float
@@ -42,9 +43,10 @@ class SurfacePriorConfig:
         if self.min_seen_frames < 1 or self.refresh_every < 1 or self.views_per_person < 1:
             raise ConfigError("pipeline.yaml prior_surface: min_seen_frames, refresh_every and views_per_person "
                               "must be at least 1")
-        if self.needle_ratio < 1.0 or self.surface_margin_m <= 0 or self.silhouette_margin_m < 0:
-            raise ConfigError("pipeline.yaml prior_surface: need needle_ratio >= 1, surface_margin_m > 0 and "
-                              "silhouette_margin_m >= 0")
+        if (self.needle_ratio < 1.0 or self.surface_margin_m <= 0 or self.silhouette_margin_m < 0
+                or self.colour_confidence <= 0):
+            raise ConfigError("pipeline.yaml prior_surface: need needle_ratio >= 1, surface_margin_m > 0, "
+                              "silhouette_margin_m >= 0 and colour_confidence > 0")
         low, high = self.orbit.elevation_deg
         if not -90.0 <= low <= high <= 90.0 or self.orbit.radius_m <= 0 or not 0 < self.orbit.fovy_deg < 180:
             raise ConfigError("pipeline.yaml prior_surface.orbit: need -90 <= elevation_deg[0] <= elevation_deg[1] "

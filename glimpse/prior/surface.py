@@ -8,10 +8,11 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
 - ``loss_prior_colour``: each unseen Gaussian's base colour (SH DC) against a completed colour of its
   vertex, plus ``view_dependent`` x its higher SH coefficients (no view taught them anything). The
   completed colours are recomputed at most every ``refresh_every`` iterations: the opacity-weighted
-  mean colour of the Gaussians of each vertex seen within ``colour_max_angle_deg`` of head-on,
-  extended to the rest of the body over the mesh plus left-right mirror edges, pulled with
-  ``part_anchor`` towards the seen mean of the vertex's body part, or of its nearest seen ancestor
-  part (glimpse.prior.complete).
+  mean colour of the Gaussians of each vertex seen within ``colour_max_angle_deg`` of head-on, held
+  with a confidence of ``colour_confidence`` x their opacity sum (faint Gaussians' colours yield to
+  their neighbours), extended to the rest of the body over the mesh plus left-right mirror edges,
+  pulled with ``part_anchor`` towards the seen mean of the vertex's body part, or of its nearest
+  seen ancestor part, both weighted by opacity (glimpse.prior.complete).
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
@@ -38,7 +39,7 @@ from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
 from glimpse.humans.person import PersonGaussians
 from glimpse.masks.assign import disk
 from glimpse.prior.base import PriorContext, UnseenPrior
-from glimpse.prior.complete import body_graph, harmonic_fill, part_groups, part_means, part_parents
+from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.prior.orbit import sample_orbit_views
 from glimpse.render import Camera, rasterize
@@ -137,8 +138,10 @@ class SurfacePrior(UnseenPrior):
         mass = torch.zeros(count, device=weights.device).index_add_(0, nearest, weights)
         known = (state.colour_source & (mass > 0)).cpu().numpy()
         mean = (total / mass.clamp(min=1e-12)[:, None]).double().cpu().numpy()
-        anchors = part_means(mean, known, self.groups, self.parent_group, self.config.part_min_seen)
-        filled = harmonic_fill(mean, known, self.graph, anchors, self.config.part_anchor)
+        opacity_mass = mass.double().cpu().numpy()
+        anchors = part_means(mean, known, self.groups, self.parent_group, self.config.part_min_seen, opacity_mass)
+        confidence = np.where(known, self.config.colour_confidence * opacity_mass, 0.0)
+        filled = screened_fill(mean, confidence, self.graph, anchors, self.config.part_anchor)
         state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
 
     def state_dict(self) -> dict:
