@@ -13,6 +13,7 @@ from glimpse.fit.config import FitConfig
 from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
 from glimpse.prior.config import PriorConfig, SurfacePriorConfig
+from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.render.config import RenderConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -21,6 +22,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "render": RenderConfig,
     "prior": PriorConfig,
     "prior_surface": SurfacePriorConfig,
+    "diffusion": DiffusionConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,

@@ -80,7 +80,7 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_surface")
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_surface", "diffusion")
 
 
 def stage_spec(name: str) -> StageSpec:

@@ -1,0 +1,221 @@
+"""The diffusion prior's parts, on tiny random diffusers models built here (no weights): the timestep
+and reconstruction-weight schedules against the paper's numbers, the SDS camera sampler against its
+stated distributions, the prompts, the skeleton condition against the projected keypoints, and the
+SDS gradient (w(t) (eps_hat - eps) in the latents, NaN-safe, reaching only the guided person)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.body.config import BodyConfig, resolve_model_path
+from glimpse.body.keypoints import keypoint_map
+from glimpse.body.model import BodyModel
+from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.crops.skeleton import OPENPOSE18_COLOURS
+from glimpse.prior.orbit import orbit_camera
+from glimpse.prior.sds.cameras import PART_JOINTS, SDSCameraConfig, fovy_deg, sample_view, view_kind, zoomed_camera
+from glimpse.prior.sds.control import skeleton_image
+from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, SDSText, encode_images, encode_text, sds_loss
+from glimpse.prior.sds.prompts import PromptConfig, view_prompts
+from glimpse.prior.sds.schedule import TimestepConfig, recon_weight, sample_timestep, timestep_range
+from glimpse.render import rasterize
+from glimpse.background.stage import render_camera
+from glimpse.gaussians.model import GaussianModel
+
+diffusers = pytest.importorskip("diffusers")
+from tests.tiny_diffusion import RENDER_PX, tiny_models  # noqa: E402
+
+PIPELINE = load_pipeline_yaml()
+BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
+TIMESTEPS = {name: TimestepConfig(name, 2000, 2000, [0.5, 0.98], [0.02, 0.3], [0.2, 0.98], 0.3, 0.3)
+             for name in ("supplementary", "main_text", "official")}
+CAMERAS = SDSCameraConfig(2.2, 49.1, [-54.0, 54.0], 2.86, {"head": 1.6, "upper": 1.4, "lower": 1.4}, 3000,
+                          {"full": 0.5, "canonical": 0.5},
+                          {"full": 0.2, "canonical": 0.2, "head": 0.2, "upper": 0.2, "lower": 0.2})
+
+
+# --- schedules -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("name", "step", "expected"), [
+    ("supplementary", 0, (0.5, 0.98)), ("supplementary", 1999, (0.5, 0.98)), ("supplementary", 3000, (0.26, 0.64)),
+    ("supplementary", 4000, (0.02, 0.3)), ("supplementary", 9000, (0.02, 0.3)),
+    ("main_text", 0, (0.2, 0.98)), ("main_text", 3000, (0.2, 0.64)), ("main_text", 5000, (0.2, 0.3)),
+    ("official", 1999, (0.5, 0.98)), ("official", 2000, (0.3, 0.98)), ("official", 3000, (0.3, 0.64)),
+    ("official", 4000, (0.02, 0.3)),
+])
+def test_timestep_ranges_follow_the_paper_and_the_official_code(name, step, expected):
+    assert timestep_range(step, TIMESTEPS[name]) == pytest.approx(expected)
+
+
+def test_sampled_timesteps_stay_in_range_and_the_reconstruction_weight_follows_the_maximum():
+    generator = torch.Generator().manual_seed(0)
+    samples = np.array([sample_timestep(3000, TIMESTEPS["supplementary"], 1000, generator) for _ in range(4000)])
+    assert samples.min() >= 260 and samples.max() <= 640
+    assert samples.min() < 265 and samples.max() > 635 and abs(samples.mean() - 450) < 6  # uniform over it
+    assert recon_weight(-1, TIMESTEPS["supplementary"], 1e6) == 1.0
+    assert recon_weight(0, TIMESTEPS["supplementary"], 1e6) == pytest.approx(1e6 * 0.98**2)  # 9.6e5
+    assert recon_weight(5000, TIMESTEPS["supplementary"], 1e6) == pytest.approx(9e4)
+
+
+# --- cameras --------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def body_model() -> BodyModel:
+    return BodyModel.from_file(resolve_model_path(BODY), dtype=torch.float64)
+
+
+def _posed(body_model: BodyModel):
+    with torch.no_grad():
+        out = body_model(torch.zeros(10), torch.zeros(1, 3), torch.zeros(1, 69), torch.zeros(1, 3))
+    return out.vertices[0].numpy(), out.joints[0].numpy()
+
+
+def test_view_kinds_follow_the_early_then_the_late_probabilities():
+    rng = np.random.default_rng(0)
+    early = [view_kind(100, CAMERAS, rng) for _ in range(3000)]
+    late = [view_kind(3000, CAMERAS, rng) for _ in range(5000)]
+    assert set(early) == {"full", "canonical"} and abs(early.count("full") / 3000 - 0.5) < 0.03
+    for kind in ("full", "canonical", "head", "upper", "lower"):
+        assert abs(late.count(kind) / 5000 - 0.2) < 0.02
+
+
+def test_orbit_views_are_uniform_in_azimuth_and_elevation_at_the_stated_radius(body_model):
+    vertices, joints = _posed(body_model)
+    labels = body_model.weights.argmax(1).numpy()
+    rng = np.random.default_rng(1)
+    views = [sample_view(0, CAMERAS, vertices, labels, joints[0], joints[0], 1.3, 128, rng) for _ in range(2000)]
+    azimuths = np.array([v.azimuth_deg for v in views])
+    elevations = np.array([v.elevation_deg for v in views])
+    assert azimuths.min() >= -180 and azimuths.max() < 180 and abs(azimuths.std() - 360 / math.sqrt(12)) < 5
+    assert elevations.min() >= -54 and elevations.max() <= 54 and abs(elevations.std() - 108 / math.sqrt(12)) < 2
+    for view in views[:20]:
+        assert np.linalg.norm(view.camera.centre - joints[0]) == pytest.approx(2.2 * 1.3)
+        assert fovy_deg(view.camera, 128) == pytest.approx(49.1)
+        assert view.camera.project(joints[:1])[0][0] == pytest.approx([63.5, 63.5])  # looking at the pelvis
+
+
+def test_a_zoomed_view_fits_its_part_to_the_crop(body_model):
+    vertices, _ = _posed(body_model)
+    labels = body_model.weights.argmax(1).numpy()
+    for kind, scale in (("head", 1.6), ("lower", 1.4)):
+        part = vertices[np.isin(labels, PART_JOINTS[kind])]
+        camera = zoomed_camera(part, 30.0, 2.86, scale, 128)
+        pixels, depth = camera.project(part)
+        offset = np.abs(pixels - 63.5).max()
+        assert (depth > 0).all() and offset == pytest.approx(64.0 / scale, rel=0.02)
+        assert np.linalg.norm(camera.centre - 0.5 * (part.min(0) + part.max(0))) == pytest.approx(2.86)
+    head = zoomed_camera(vertices[np.isin(labels, PART_JOINTS["head"])], 0.0, 2.86, 1.6, 128)
+    assert fovy_deg(head, 128) < 15.0  # a head fills the view: far narrower than the orbit's 49.1
+
+
+# --- prompts and the skeleton ------------------------------------------------------------------------------
+
+def test_prompts_carry_the_view_and_the_token_only_for_the_unet():
+    config = PromptConfig("high quality", "two people", {"head": "head"})
+    prompts = view_prompts("a photo of a {token} person, {view} view", "p1", "back", "head", config)
+    assert prompts.unet == "a photo of a <person-p1> person, back view, head, high quality"
+    assert prompts.controlnet == "a photo of a person, back view, head, high quality"
+    assert prompts.negative == "two people, front view"
+    side = view_prompts("a photo of a {token} person, {view} view", "p1", "side", "full", config)
+    assert side.negative == "two people" and "head" not in side.unet
+
+
+def test_the_skeleton_is_drawn_at_the_projected_keypoints_and_hides_the_face_from_behind(body_model):
+    vertices, joints = _posed(body_model)
+    kmap = keypoint_map("openpose18", body_model.data)
+    with torch.no_grad():
+        keypoints = kmap(torch.as_tensor(joints[None]), torch.as_tensor(vertices[None]))[0].numpy()
+    front = orbit_camera(joints[0], 0.0, 0.0, 2.2, 49.1, 128)
+    image, pixels, shown = skeleton_image(keypoints, joints[15], front, 128, 2.0)
+    assert shown.all()
+    for k in range(18):
+        u, v = np.rint(pixels[k]).astype(int)
+        assert tuple(image[v, u]) == OPENPOSE18_COLOURS[k]  # the keypoint's own dot colour
+    behind = orbit_camera(joints[0], 180.0, 0.0, 2.2, 49.1, 128)
+    _, _, shown_behind = skeleton_image(keypoints, joints[15], behind, 128, 2.0)
+    assert not shown_behind[[0, 14, 15]].any()  # nose and eyes turned away
+
+
+# --- the SDS step -------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory) -> DiffusionModels:
+    unet, controlnet, vae, text_encoder, tokenizer, scheduler = tiny_models(tmp_path_factory.mktemp("tiny"))
+    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler.alphas_cumprod)
+
+
+@pytest.fixture(scope="module")
+def text(models) -> SDSText:
+    encoded = encode_text(models, ["a photo of a person", "a photo", "two people"])
+    return SDSText(encoded[0:1], encoded[1:2], encoded[2:3])
+
+
+SDS = SDSConfig(guidance_scale=50.0, controlnet_scale=0.7, resolution_px=RENDER_PX)
+
+
+def test_the_gradient_in_the_latents_is_the_weighted_guided_noise_residual(models, text):
+    rgb = torch.rand(2, 3, RENDER_PX, RENDER_PX, generator=torch.Generator().manual_seed(1))
+    skeleton = torch.rand(2, 3, RENDER_PX, RENDER_PX, generator=torch.Generator().manual_seed(2))
+    latents = encode_images(models, rgb).detach().requires_grad_(True)
+    timestep = 600
+    loss, _ = sds_loss(models, rgb, skeleton, text, timestep, torch.Generator().manual_seed(3), SDS)
+    # the same step by hand, from the same noise
+    from glimpse.prior.sds.guidance import predicted_noise
+    noise = torch.randn(latents.shape, generator=torch.Generator().manual_seed(3))
+    alpha_bar = models.alphas_cumprod[timestep]
+    noisy = alpha_bar.sqrt() * latents.detach() + (1 - alpha_bar).sqrt() * noise
+    expected = (1 - alpha_bar) * (predicted_noise(models, noisy, timestep, skeleton, text, SDS) - noise)
+    assert loss.item() == pytest.approx(0.5 * expected.square().sum().item() / 2, rel=1e-5)
+    # gradient in the latents: through the loss's own latents
+    rgb_leaf = rgb.clone().requires_grad_(True)
+    captured = {}
+    original = models.vae.encode
+
+    def spy(x):
+        out = original(x)
+        out.latent_dist.mean.retain_grad()
+        captured["mean"] = out.latent_dist.mean
+        return out
+
+    models.vae.encode = spy
+    try:
+        loss, _ = sds_loss(models, rgb_leaf, skeleton, text, timestep, torch.Generator().manual_seed(3), SDS)
+        loss.backward()
+    finally:
+        models.vae.encode = original
+    scaling = models.vae.config.scaling_factor
+    torch.testing.assert_close(captured["mean"].grad, expected * scaling / 2, rtol=1e-4, atol=1e-6)
+    assert torch.isfinite(rgb_leaf.grad).all() and rgb_leaf.grad.abs().sum() > 0
+
+
+def test_a_nan_prediction_gives_a_zero_gradient(models, text, monkeypatch):
+    import glimpse.prior.sds.guidance as guidance
+
+    monkeypatch.setattr(guidance, "predicted_noise", lambda *args: torch.full((1, 4, 8, 8), float("nan")))
+    rgb = torch.rand(1, 3, RENDER_PX, RENDER_PX, requires_grad=True)
+    loss, info = sds_loss(models, rgb, torch.zeros(1, 3, RENDER_PX, RENDER_PX), text, 500,
+                          torch.Generator().manual_seed(0), SDS)
+    loss.backward()
+    assert loss.item() == 0.0 and info["sds_grad_norm"] == 0.0 and (rgb.grad == 0).all()
+
+
+def _gaussians(seed: int, offset: float) -> GaussianModel:
+    generator = torch.Generator().manual_seed(seed)
+    count = 300
+    means = torch.randn(count, 3, generator=generator) * 0.25 + torch.tensor([offset, 0.0, 0.0])
+    return GaussianModel.from_points(means, torch.rand(count, 3, generator=generator), torch.full((count,), 0.03), 0.9, 0)
+
+
+def test_sds_gradients_reach_the_guided_persons_colours_and_positions_only(models, text):
+    guided, other = _gaussians(0, 0.0), _gaussians(1, 3.0)
+    camera = render_camera(orbit_camera(np.zeros(3), 0.0, 0.0, 2.2, 49.1, 48), 48, 48, torch.device("cpu"))
+    rgb = rasterize(camera, **guided.render_inputs(0), background=torch.ones(3)).rgb  # the guided person alone
+    loss, _ = sds_loss(models, rgb.permute(2, 0, 1)[None], torch.zeros(1, 3, RENDER_PX, RENDER_PX), text, 700,
+                       torch.Generator().manual_seed(0), SDS)
+    loss.backward()
+    assert guided.sh_dc.grad.abs().sum() > 0 and guided.means.grad.abs().sum() > 0
+    assert other.sh_dc.grad is None and other.means.grad is None
