@@ -1,11 +1,14 @@
 """The diffusion prior's parts, on tiny random diffusers models built here (no weights): the timestep
 and reconstruction-weight schedules against the paper's numbers, the SDS camera sampler against its
-stated distributions, the prompts, the skeleton condition against the projected keypoints, and the
-SDS gradient (w(t) (eps_hat - eps) in the latents, NaN-safe, reaching only the guided person)."""
+stated distributions, the prompts, the skeleton condition against the projected keypoints, the SDS
+gradient (w(t) (eps_hat - eps) in the latents, NaN-safe, reaching only the guided person), and loading
+weights from local folders with the hub off."""
 
 from __future__ import annotations
 
 import math
+import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,11 +18,14 @@ from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.errors import ConfigError, GlimpseError
 from glimpse.crops.skeleton import OPENPOSE18_COLOURS
 from glimpse.prior.orbit import orbit_camera
 from glimpse.prior.sds.cameras import PART_JOINTS, SDSCameraConfig, fovy_deg, sample_view, view_kind, zoomed_camera
 from glimpse.prior.sds.control import skeleton_image
+from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, SDSText, encode_images, encode_text, sds_loss
+from glimpse.prior.sds.load import check_weight_paths, diffusion_device, load_diffusion
 from glimpse.prior.sds.prompts import PromptConfig, view_prompts
 from glimpse.prior.sds.schedule import TimestepConfig, recon_weight, sample_timestep, timestep_range
 from glimpse.render import rasterize
@@ -27,7 +33,7 @@ from glimpse.background.stage import render_camera
 from glimpse.gaussians.model import GaussianModel
 
 diffusers = pytest.importorskip("diffusers")
-from tests.tiny_diffusion import RENDER_PX, tiny_models  # noqa: E402
+from tests.tiny_diffusion import RENDER_PX, tiny_models, write_tiny_weights  # noqa: E402
 
 PIPELINE = load_pipeline_yaml()
 BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
@@ -219,3 +225,45 @@ def test_sds_gradients_reach_the_guided_persons_colours_and_positions_only(model
     loss.backward()
     assert guided.sh_dc.grad.abs().sum() > 0 and guided.means.grad.abs().sum() > 0
     assert other.sh_dc.grad is None and other.means.grad is None
+
+
+# --- loading the weights --------------------------------------------------------------------------------------
+
+DIFFUSION = config_from_mapping(DiffusionConfig, PIPELINE["diffusion"], "diffusion")
+
+
+def test_weights_load_from_local_folders_with_the_hub_off(tmp_path):
+    sd, controlnet = write_tiny_weights(tmp_path)
+    config = replace(DIFFUSION, sd_path=str(sd), controlnet_path=str(controlnet), allow_cpu=True)
+    os.environ.pop("HF_HUB_OFFLINE", None)
+    loaded = load_diffusion(config, torch.device("cpu"))
+    assert "HF_HUB_OFFLINE" not in os.environ  # switched off only while loading
+    unet, *_ = tiny_models(tmp_path / "again")  # the same seed: the same weights
+    for name, value in unet.state_dict().items():
+        torch.testing.assert_close(loaded.unet.state_dict()[name], value)
+    assert loaded.train_timesteps == 1000 and not any(p.requires_grad for p in loaded.unet.parameters())
+    encoded = encode_text(loaded, ["a photo", "a", "b"])
+    loss, _ = sds_loss(loaded, torch.rand(1, 3, 32, 32), torch.zeros(1, 3, RENDER_PX, RENDER_PX),
+                       SDSText(encoded[0:1], encoded[1:2], encoded[2:3]), 400, torch.Generator().manual_seed(0), SDS)
+    assert torch.isfinite(loss)
+
+
+def test_missing_or_wrong_weights_are_refused_with_the_parameter_to_set(tmp_path):
+    with pytest.raises(ConfigError, match=r"diffusion\.sd_path and diffusion\.controlnet_path"):
+        check_weight_paths(DIFFUSION)
+    (tmp_path / "sd" / "unet").mkdir(parents=True)
+    (tmp_path / "cn").mkdir()
+    with pytest.raises(ConfigError, match=r"lacks vae/, text_encoder/, tokenizer/, scheduler/"):
+        check_weight_paths(replace(DIFFUSION, sd_path=str(tmp_path / "sd"), controlnet_path=str(tmp_path / "cn")))
+    checkpoint = tmp_path / "v1-5-pruned.safetensors"
+    checkpoint.write_bytes(b"0")
+    with pytest.raises(ConfigError, match="single-file checkpoint"):
+        check_weight_paths(replace(DIFFUSION, sd_path=str(checkpoint), controlnet_path=str(tmp_path / "cn")))
+
+
+def test_without_cuda_sds_stops_unless_the_cpu_is_allowed():
+    with pytest.raises(GlimpseError, match="needs a CUDA GPU.*diffusion.allow_cpu"):
+        diffusion_device(DIFFUSION, torch.device("cpu"))
+    assert diffusion_device(replace(DIFFUSION, allow_cpu=True), torch.device("cpu")) == (torch.device("cpu"),
+                                                                                        torch.float32)
+    assert diffusion_device(DIFFUSION, torch.device("cuda"))[1] == torch.float16

@@ -62,3 +62,16 @@ def tiny_models(folder: Path, seed: int = 0):
     for module in (unet, controlnet, vae, text_encoder):
         module.eval().requires_grad_(False)
     return unet, controlnet, vae, text_encoder, tokenizer, scheduler
+
+
+def write_tiny_weights(folder: Path, seed: int = 0) -> tuple[Path, Path]:
+    """(sd_path, controlnet_path): the tiny models saved as diffusers-format folders, as a user's would be."""
+    unet, controlnet, vae, text_encoder, tokenizer, scheduler = tiny_models(folder / "build", seed)
+    sd, controlnet_dir = folder / "sd", folder / "controlnet"
+    unet.save_pretrained(sd / "unet")
+    vae.save_pretrained(sd / "vae")
+    text_encoder.save_pretrained(sd / "text_encoder")
+    tokenizer.save_pretrained(sd / "tokenizer")
+    scheduler.save_pretrained(sd / "scheduler")
+    controlnet.save_pretrained(controlnet_dir)
+    return sd, controlnet_dir
