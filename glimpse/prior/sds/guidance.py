@@ -46,6 +46,11 @@ class DiffusionModels:
     def train_timesteps(self) -> int:
         return len(self.alphas_cumprod)
 
+    @property
+    def vae_scale_factor(self) -> int:
+        """Image pixels per latent pixel (SD 1.5: 8)."""
+        return 2 ** (len(self.vae.config.block_out_channels) - 1)
+
 
 @dataclass(frozen=True)
 class SDSConfig:

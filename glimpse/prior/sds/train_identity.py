@@ -1,0 +1,113 @@
+"""Stage 05's identity training: CustomDiffusion on one person's crops (glimpse/prior/sds/identity.py).
+
+Each step draws ``batch_size`` crops, encodes them with the VAE (no gradients), adds noise at
+uniformly random timesteps, and predicts it with the UNet (the crop's view prompt with the
+person's token; that person's K/V processors) steered by the frozen ControlNet (the skeleton image,
+the prompt without the token). The loss is the MSE between predicted and true noise, per latent
+pixel weighted 1 on the person (the crop's soft mask) and ``background_weight`` elsewhere (1: plain
+CustomDiffusion; official code 0.5). Adam updates the token's embedding row and the K/V projections
+only: the other embedding rows are restored after every step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from glimpse.prior.sds.guidance import DiffusionModels, encode_images, encode_text
+from glimpse.prior.sds.identity import IdentitySwitch, PersonIdentity
+
+
+@dataclass(frozen=True)
+class IdentityConfig:
+    steps: int                 # optimisation steps per person (paper: 1000)
+    learning_rate: float       # Adam, token row and K/V (paper: 5e-6; official code: 1e-5)
+    batch_size: int            # crops per step (paper: 4; official code: 2)
+    background_weight: float   # loss weight off the person's mask (1: plain; official code: 0.5)
+    controlnet_scale: float    # the ControlNet's residual weight while training (official code: 1.0)
+
+
+@dataclass
+class IdentityExample:
+    """One training crop: image [3, S, S] and skeleton [3, S, S] in 0..1, mask [S, S] in 0..1, and the
+    UNet's prompt (with the token) and the ControlNet's (without)."""
+
+    image: Tensor
+    mask: Tensor
+    skeleton: Tensor
+    prompt: str
+    control_prompt: str
+
+
+def _encode_with_grad(models: DiffusionModels, texts: list[str]) -> Tensor:
+    tokens = models.tokenizer(texts, padding="max_length", max_length=models.tokenizer.model_max_length,
+                              truncation=True, return_tensors="pt").input_ids.to(models.device)
+    return models.text_encoder(tokens)[0].to(models.dtype)
+
+
+def identity_loss(models: DiffusionModels, examples: list[IdentityExample], timesteps: Tensor, noise: Tensor,
+                  config: IdentityConfig) -> Tensor:
+    """The weighted noise-prediction MSE of one batch at ``timesteps [B]`` with ``noise [B, C, h, w]``
+    (gradients reach the token's embedding and whatever attention processors the UNet holds)."""
+    images = torch.stack([e.image for e in examples]).to(models.device)
+    skeletons = torch.stack([e.skeleton for e in examples]).to(models.device, models.dtype)
+    with torch.no_grad():
+        latents = encode_images(models, images)
+        alpha_bar = models.alphas_cumprod[timesteps].to(latents.dtype)[:, None, None, None]
+        noisy = alpha_bar.sqrt() * latents + (1.0 - alpha_bar).sqrt() * noise
+        control_text = encode_text(models, [e.control_prompt for e in examples])
+        down, middle = models.controlnet(noisy, timesteps, encoder_hidden_states=control_text,
+                                         controlnet_cond=skeletons, conditioning_scale=config.controlnet_scale,
+                                         return_dict=False)
+    text = _encode_with_grad(models, [e.prompt for e in examples])
+    predicted = models.unet(noisy, timesteps, encoder_hidden_states=text, down_block_additional_residuals=down,
+                            mid_block_additional_residual=middle, return_dict=False)[0]
+    masks = torch.stack([e.mask for e in examples]).to(models.device)[:, None].float()
+    on_person = F.interpolate(masks, size=latents.shape[-2:], mode="area")
+    weight = on_person + config.background_weight * (1.0 - on_person)
+    return ((predicted.float() - noise.float()).square() * weight).mean()
+
+
+def train_identity(models: DiffusionModels, identity: PersonIdentity, examples: list[IdentityExample],
+                   config: IdentityConfig, generator: torch.Generator,
+                   progress: Callable[[int, float], None] | None = None) -> list[float]:
+    """Train ``identity`` on ``examples`` for ``config.steps`` steps; the loss of every step."""
+    switch = IdentitySwitch(models.unet)
+    switch.use(identity)
+    table = models.text_encoder.get_input_embeddings().weight
+    kept = table.detach().clone()
+    others = torch.ones(len(table), dtype=torch.bool, device=table.device)
+    others[identity.token_id] = False
+    kv = identity.kv_parameters()
+    for parameter in kv:
+        parameter.requires_grad_(True)
+    table.requires_grad_(True)
+    optimizer = torch.optim.Adam([table, *kv], lr=config.learning_rate)
+    losses = []
+    try:
+        for step in range(config.steps):
+            picks = torch.randint(len(examples), (config.batch_size,), generator=generator).tolist()
+            timesteps = torch.randint(models.train_timesteps, (len(picks),), generator=generator).to(models.device)
+            batch = [examples[k] for k in picks]
+            size = batch[0].image.shape[-1] // models.vae_scale_factor
+            channels = models.unet.config.in_channels
+            noise = torch.randn(len(picks), channels, size, size, generator=generator).to(models.device, models.dtype)
+            loss = identity_loss(models, batch, timesteps, noise, config)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            with torch.no_grad():
+                table[others] = kept[others]
+            losses.append(float(loss.detach()))
+            if progress is not None:
+                progress(step, losses[-1])
+    finally:
+        table.requires_grad_(False)
+        for parameter in kv:
+            parameter.requires_grad_(False)
+        switch.use(None)
+    return losses
