@@ -19,7 +19,7 @@ TOKEN = "<person-p0>"
 
 def _models(folder, seed: int = 0) -> DiffusionModels:
     unet, controlnet, vae, text_encoder, tokenizer, scheduler = tiny_models(folder, seed)
-    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler.alphas_cumprod)
+    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler, torch.device("cpu"))
 
 
 def _examples(count: int = 4) -> list[IdentityExample]:

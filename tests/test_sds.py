@@ -151,7 +151,7 @@ def test_the_skeleton_is_drawn_at_the_projected_keypoints_and_hides_the_face_fro
 @pytest.fixture(scope="module")
 def models(tmp_path_factory) -> DiffusionModels:
     unet, controlnet, vae, text_encoder, tokenizer, scheduler = tiny_models(tmp_path_factory.mktemp("tiny"))
-    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler.alphas_cumprod)
+    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler, torch.device("cpu"))
 
 
 @pytest.fixture(scope="module")

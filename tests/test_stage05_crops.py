@@ -1,6 +1,7 @@
 """Stage 05's crops: the square box and padding, the soft mask, view words, hidden face keypoints,
 the OpenPose drawing, then the stage on the tiny demo scene (files, keypoints on the person,
-determinism, people with no usable frame, the sds prior refused)."""
+determinism, people with no usable frame; with the sds prior: no weights refused, identities
+trained on tiny models)."""
 
 from __future__ import annotations
 
@@ -19,9 +20,9 @@ from glimpse.crops.skeleton import (
 )
 from glimpse.crops.stage import evenly_spaced, identity_plan
 from glimpse.crops.view import facing_azimuth_deg, view_prompt, view_word
-from glimpse.errors import GlimpseError
+from glimpse.errors import ConfigError
 from glimpse.fixtures.scenes import FREE_BODY, make_scene
-from glimpse.io.images import read_mask, read_rgb
+from glimpse.io.images import read_mask, read_rgb, write_png
 from tests.stage_helpers import read_json, run
 
 STAGE = "05_textual_inversion"
@@ -252,11 +253,46 @@ def test_stage_is_deterministic_and_reports_people_without_crops(demo, tmp_path)
         assert entry["crops"] == 0 and "min_mask_px" in entry["note"]
 
 
-def test_the_sds_prior_is_refused_until_it_exists(demo, tmp_path):
+def test_the_sds_prior_without_weights_stops_before_any_work(demo, tmp_path):
     scene, root, _ = demo
     twin = tmp_path / "out"
     shutil.copytree(root / "out", twin, ignore=shutil.ignore_patterns(STAGE))
-    with pytest.raises(GlimpseError, match=r"issue #12.*prior.kind none"):
+    with pytest.raises(ConfigError, match=r"diffusion\.sd_path and diffusion\.controlnet_path"):
         run(STAGE, scene, twin, "prior.kind=sds")
     assert not (twin / "demo_tiny" / STAGE).exists()
     assert identity_plan("surface").reason.startswith("prior.kind is surface")
+    assert identity_plan("sds").identity == "trained"
+
+
+def test_the_sds_prior_trains_each_persons_identity_with_tiny_models(demo, tmp_path):
+    pytest.importorskip("diffusers")
+    from glimpse.prior.sds.guidance import DiffusionModels
+    from glimpse.prior.sds.identity import load_identity
+    from tests.tiny_diffusion import RENDER_PX, tiny_models, write_tiny_weights
+
+    scene, root, _ = demo
+    scene_copy, twin = tmp_path / "scene", tmp_path / "out"
+    shutil.copytree(scene, scene_copy)
+    reference = scene_copy / "humans" / "p0" / "reference"
+    reference.mkdir()
+    write_png(reference / "face.png", np.full((40, 30, 3), 200, np.uint8))  # another photo of p0
+    shutil.copytree(root / "out", twin, ignore=shutil.ignore_patterns(STAGE))
+    sd, controlnet = write_tiny_weights(tmp_path / "weights")
+    identity = f"{STAGE}.identity"
+    out = run(STAGE, scene_copy, twin,
+              f"{PARAMS} prior.kind=sds diffusion.sd_path={sd} diffusion.controlnet_path={controlnet} "
+              f"diffusion.allow_cpu=true {STAGE}.crop_size_px={RENDER_PX} {identity}.steps=3 {identity}.batch_size=2 "
+              f"{identity}.samples.count=2 {identity}.samples.steps=2")
+    manifest = read_json(out / "manifest.json")
+    assert manifest["summary"]["identity"] == "trained"
+    people = manifest["summary"]["people"]
+    assert people["p0"]["identity"]["references"] == 1 and people["p1"]["identity"]["references"] == 0
+    for pid in ("p0", "p1"):
+        summary = people[pid]["identity"]
+        assert summary["trained"] and summary["steps"] == 3
+        assert summary["examples"] == people[pid]["crops"] + summary["references"]
+        assert read_rgb(out / pid / "identity" / "samples.png").shape == (RENDER_PX, 2 * RENDER_PX, 3)
+        assert manifest["formats"][f"{pid}/identity/identity.safetensors"] == "glimpse-identity/1"
+        unet, cn, vae, text_encoder, tokenizer, scheduler = tiny_models(tmp_path / f"fresh_{pid}")
+        fresh = DiffusionModels(unet, cn, vae, text_encoder, tokenizer, scheduler, torch.device("cpu"))
+        assert load_identity(fresh, out / pid / "identity" / "identity.safetensors").token == f"<person-{pid}>"

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from glimpse.errors import ConfigError
+from glimpse.prior.sds.train_identity import IdentityConfig
 
 
 @dataclass(frozen=True)
@@ -19,6 +20,7 @@ class CropsConfig:
     front_max_deg: float
     back_min_deg: float
     prompt_template: str
+    identity: IdentityConfig  # prior.kind sds only: the CustomDiffusion training
 
     def __post_init__(self) -> None:
         if self.crop_size_px < 16 or self.crop_margin < 1.0:

@@ -1,7 +1,8 @@
 """Stage 05's crop part: per person, square crops of the frames where it is visible enough, its soft
 mask, the OpenPose-18 skeleton of its posed body and a view prompt, written under
-``<pid>/crops/`` with ``crops.json`` (glimpse-crops/1). The identity (token embedding) is trained
-only for the sds prior, which is not built yet (issue #12): any other prior skips it.
+``<pid>/crops/`` with ``crops.json`` (glimpse-crops/1). The identity (token embedding and
+cross-attention K/V) is trained only for the sds prior (glimpse/prior/sds/person_identity.py);
+any other prior skips it.
 
 Frames: those with a camera (stage 01), a body (stage 02) and a visible mask (stage 03) of at
 least ``min_mask_px`` pixels; at most ``max_crops``, evenly spaced. The run.py only loads inputs
@@ -30,7 +31,6 @@ from glimpse.crops.skeleton import (
     HEAD_JOINT, OPENPOSE18_NAMES, draw_skeleton, hidden_face, shown_keypoints,
 )
 from glimpse.crops.view import VIEWS, facing_azimuth_deg, person_token, view_prompt, view_word
-from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.prior import resolve_prior_kind
 
@@ -40,7 +40,6 @@ PELVIS_JOINT = 0
 PIXEL_DECIMALS = 2  # crops.json: keypoint pixels rounded to 1/100 pixel
 ANGLE_DECIMALS = 2  # crops.json: azimuths rounded to 1/100 degree
 MASK_LEVELS = 255  # the soft mask is written as 0-255
-SDS_ISSUE = "#12 (diffusion prior)"
 
 
 @dataclass(frozen=True)
@@ -55,8 +54,8 @@ class CropsInputs:
 
 @dataclass(frozen=True)
 class IdentityPlan:
-    """What stage 05 does about the identity: prior_kind is prior.kind resolved; identity "skipped"
-    (the only outcome until the sds prior exists) and why."""
+    """What stage 05 does about the identity: prior_kind is prior.kind resolved; identity "trained" (sds)
+    or "skipped", and why."""
 
     prior_kind: str
     identity: str
@@ -64,13 +63,11 @@ class IdentityPlan:
 
 
 def identity_plan(kind: str) -> IdentityPlan:
-    """prior.kind -> the identity plan (``auto`` resolved as glimpse.prior does: sds is not built
-    yet); ``sds`` is an error until issue #12 brings the diffusion prior."""
+    """prior.kind -> the identity plan (``auto`` resolved as glimpse.prior does)."""
     resolved = resolve_prior_kind(kind)
     if resolved == "sds":
-        raise GlimpseError(f"prior.kind is sds, but identity training arrives with issue {SDS_ISSUE}: the "
-                           f"diffusion prior is not built yet. Use prior.kind none for now "
-                           f'(PARAMS="prior.kind=none" or in pipeline.yaml)')
+        return IdentityPlan(resolved, "trained", "prior.kind is sds: each person's CustomDiffusion identity "
+                                                 "is trained on their crops")
     why = f"auto resolves to {resolved}" if kind == "auto" else f"is {kind}"
     return IdentityPlan(resolved, "skipped", f"prior.kind {why}: only the sds prior uses an identity; "
                                              "crops written for later use")

@@ -62,7 +62,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "05_textual_inversion",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute", "body", "prior"),
+        shared=("compute", "body", "prior", "diffusion"),
         scene_inputs=("humans/*/reference/*",),
     ),
     StageSpec(

@@ -15,7 +15,7 @@ person's identity (token embedding, cross-attention K/V) is swapped into them be
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -25,18 +25,19 @@ from torch import Tensor
 
 @dataclass
 class DiffusionModels:
-    """The shared diffusion parts (one set for every person)."""
+    """The shared diffusion parts (one set for every person), frozen, on ``device``."""
 
     unet: Any            # diffusers UNet2DConditionModel
     controlnet: Any      # diffusers ControlNetModel
     vae: Any             # diffusers AutoencoderKL
     text_encoder: Any    # transformers CLIPTextModel
     tokenizer: Any       # transformers CLIPTokenizer
-    alphas_cumprod: Tensor  # [T] the training noise schedule's cumulative products of alpha
+    scheduler: Any       # the training noise schedule (a diffusers scheduler; its alphas_cumprod)
+    device: torch.device
+    alphas_cumprod: Tensor = field(init=False)  # [T] cumulative products of alpha, on device, float32
 
-    @property
-    def device(self) -> torch.device:
-        return self.alphas_cumprod.device
+    def __post_init__(self) -> None:
+        self.alphas_cumprod = torch.as_tensor(self.scheduler.alphas_cumprod).to(self.device, torch.float32)
 
     @property
     def dtype(self) -> torch.dtype:

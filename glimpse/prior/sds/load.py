@@ -102,5 +102,4 @@ def load_diffusion(config: DiffusionConfig, device: torch.device) -> DiffusionMo
             raise GlimpseError(f"diffusion weights could not be read from {sd} and {controlnet_dir}: {error}") from error
     for module in (unet, vae, text_encoder, controlnet):
         module.to(device).eval().requires_grad_(False)
-    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer,
-                           scheduler.alphas_cumprod.to(device=device, dtype=torch.float32))
+    return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler, device)

@@ -32,6 +32,11 @@ class ViewPrompts:
     negative: str
 
 
+def without_token(text: str, token: str) -> str:
+    """``text`` with ``token`` removed and the spaces it leaves closed ("a <person-p0> person" -> "a person")."""
+    return " ".join(text.replace(token, "").split()).replace(" ,", ",")
+
+
 def view_prompts(template: str, pid: str, view: str, part: str, config: PromptConfig) -> ViewPrompts:
     """Prompts for person ``pid`` seen from ``view`` (front/side/back); ``part`` is the camera's kind (full,
     canonical, head, upper, lower): the zoomed kinds add their words."""
@@ -41,8 +46,7 @@ def view_prompts(template: str, pid: str, view: str, part: str, config: PromptCo
     if config.quality:
         words.append(config.quality)
     unet = ", ".join(words)
-    token = person_token(pid)
-    controlnet = " ".join(unet.replace(token, "").split()).replace(" ,", ",")
+    controlnet = without_token(unet, person_token(pid))
     negative = config.negative
     if view in OPPOSITE_VIEW:
         negative = f"{negative}, {OPPOSITE_VIEW[view]} view"

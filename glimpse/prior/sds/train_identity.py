@@ -18,8 +18,17 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from glimpse.errors import ConfigError
+
 from glimpse.prior.sds.guidance import DiffusionModels, encode_images, encode_text
 from glimpse.prior.sds.identity import IdentitySwitch, PersonIdentity
+
+
+@dataclass(frozen=True)
+class SampleConfig:
+    count: int             # samples in the grid (0: none)
+    steps: int             # DDIM steps per sample
+    guidance_scale: float  # classifier-free guidance of the samples (SD's usual 7.5)
 
 
 @dataclass(frozen=True)
@@ -29,6 +38,13 @@ class IdentityConfig:
     batch_size: int            # crops per step (paper: 4; official code: 2)
     background_weight: float   # loss weight off the person's mask (1: plain; official code: 0.5)
     controlnet_scale: float    # the ControlNet's residual weight while training (official code: 1.0)
+    reference_prompt: str      # the prompt of reference photos, with {token}
+    samples: SampleConfig      # the grid of samples written after training
+
+    def __post_init__(self) -> None:
+        if self.steps < 0 or self.batch_size < 1 or self.learning_rate <= 0:
+            raise ConfigError("pipeline.yaml 05_textual_inversion.identity: need steps >= 0, batch_size >= 1 and "
+                              "learning_rate > 0")
 
 
 @dataclass
