@@ -9,7 +9,9 @@ import torch
 
 from glimpse.prior.sds.guidance import DiffusionModels
 from glimpse.prior.sds.identity import IdentitySwitch, load_identity, new_identity, save_identity
-from glimpse.prior.sds.train_identity import IdentityConfig, IdentityExample, identity_loss, train_identity
+from glimpse.prior.sds.train_identity import (
+    IdentityConfig, IdentityExample, SampleConfig, identity_loss, train_identity,
+)
 
 pytest.importorskip("diffusers")
 from tests.tiny_diffusion import RENDER_PX, tiny_models  # noqa: E402
@@ -20,6 +22,11 @@ TOKEN = "<person-p0>"
 def _models(folder, seed: int = 0) -> DiffusionModels:
     unet, controlnet, vae, text_encoder, tokenizer, scheduler = tiny_models(folder, seed)
     return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler, torch.device("cpu"))
+
+
+def _config(**values) -> IdentityConfig:
+    return IdentityConfig(**values, controlnet_scale=1.0, reference_prompt="a photo of a {token} person",
+                          samples=SampleConfig(0, 1, 7.5))
 
 
 def _examples(count: int = 4) -> list[IdentityExample]:
@@ -43,7 +50,7 @@ def test_one_step_lowers_the_loss_and_trains_only_the_token_and_the_kv_projectio
     models = _models(tmp_path)
     identity = new_identity(models, TOKEN)
     examples = _examples()
-    config = IdentityConfig(steps=1, learning_rate=1e-3, batch_size=4, background_weight=0.5, controlnet_scale=1.0)
+    config = _config(steps=1, learning_rate=1e-3, batch_size=4, background_weight=0.5)
     before = {name: _snapshot(getattr(models, name)) for name in ("unet", "controlnet", "vae", "text_encoder")}
     kv_before = [p.detach().clone() for p in identity.kv_parameters()]
     timesteps, noise = torch.tensor([100, 300, 500, 900]), torch.randn(4, 4, 8, 8, generator=torch.Generator().manual_seed(1))
@@ -71,7 +78,7 @@ def test_one_step_lowers_the_loss_and_trains_only_the_token_and_the_kv_projectio
 def test_a_saved_identity_loads_into_fresh_models_and_predicts_the_same(tmp_path):
     models = _models(tmp_path / "a")
     identity = new_identity(models, TOKEN)
-    config = IdentityConfig(steps=2, learning_rate=1e-3, batch_size=2, background_weight=1.0, controlnet_scale=1.0)
+    config = _config(steps=2, learning_rate=1e-3, batch_size=2, background_weight=1.0)
     train_identity(models, identity, _examples(), config, torch.Generator().manual_seed(0))
     path = tmp_path / "identity" / "identity.safetensors"
     save_identity(identity, models, path)
@@ -99,7 +106,7 @@ def test_swapping_a_person_out_restores_the_plain_unet(tmp_path):
             processor.to_k_custom_diffusion.weight.mul_(1.5)  # a person whose K differs from the plain UNet's
     examples, timesteps = _examples(1), torch.tensor([400])
     noise = torch.randn(1, 4, 8, 8, generator=torch.Generator().manual_seed(3))
-    config = IdentityConfig(1, 1e-3, 1, 1.0, 1.0)
+    config = _config(steps=1, learning_rate=1e-3, batch_size=1, background_weight=1.0)
     with torch.no_grad():
         plain = float(identity_loss(models, examples, timesteps, noise, config))
         switch.use(identity)
