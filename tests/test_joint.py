@@ -130,9 +130,8 @@ def test_people_box_grows_to_the_minimum_size_inside_the_image():
 
 def test_priors_are_chosen_by_name_and_unknown_ones_are_listed():
     assert resolve_prior_kind("auto") == "surface" and check_prior_kind("none") == "none"
-    with pytest.raises(ConfigError, match="issue #12"):
-        check_prior_kind("sds")
-    with pytest.raises(ConfigError, match="registered priors: none, surface"):
+    assert resolve_prior_kind("auto", diffusion_ready=True) == "sds" and check_prior_kind("sds") == "sds"
+    with pytest.raises(ConfigError, match="registered priors: none, surface, sds"):
         check_prior_kind("magic")
 
 

@@ -93,7 +93,7 @@ def test_orbit_views_are_uniform_in_azimuth_and_elevation_at_the_stated_radius(b
     vertices, joints = _posed(body_model)
     labels = body_model.weights.argmax(1).numpy()
     rng = np.random.default_rng(1)
-    views = [sample_view(0, CAMERAS, vertices, labels, joints[0], joints[0], 1.3, 128, rng) for _ in range(2000)]
+    views = [sample_view("full", CAMERAS, vertices, labels, joints[0], 1.3, 128, rng) for _ in range(2000)]
     azimuths = np.array([v.azimuth_deg for v in views])
     elevations = np.array([v.elevation_deg for v in views])
     assert azimuths.min() >= -180 and azimuths.max() < 180 and abs(azimuths.std() - 360 / math.sqrt(12)) < 5
@@ -121,12 +121,13 @@ def test_a_zoomed_view_fits_its_part_to_the_crop(body_model):
 # --- prompts and the skeleton ------------------------------------------------------------------------------
 
 def test_prompts_carry_the_view_and_the_token_only_for_the_unet():
-    config = PromptConfig("high quality", "two people", {"head": "head"})
-    prompts = view_prompts("a photo of a {token} person, {view} view", "p1", "back", "head", config)
+    config = PromptConfig("a photo of a {token} person, {view} view", 45.0, 135.0, "high quality", "two people",
+                          {"head": "head"})
+    prompts = view_prompts("p1", "back", "head", config)
     assert prompts.unet == "a photo of a <person-p1> person, back view, head, high quality"
     assert prompts.controlnet == "a photo of a person, back view, head, high quality"
     assert prompts.negative == "two people, front view"
-    side = view_prompts("a photo of a {token} person, {view} view", "p1", "side", "full", config)
+    side = view_prompts("p1", "side", "full", config)
     assert side.negative == "two people" and "head" not in side.unet
 
 
@@ -267,3 +268,59 @@ def test_without_cuda_sds_stops_unless_the_cpu_is_allowed():
     assert diffusion_device(replace(DIFFUSION, allow_cpu=True), torch.device("cpu")) == (torch.device("cpu"),
                                                                                         torch.float32)
     assert diffusion_device(DIFFUSION, torch.device("cuda"))[1] == torch.float16
+
+
+# --- the prior in stage 06 ----------------------------------------------------------------------------------
+
+def _sds_prior(tmp_path, body_model, combine: str = "separate_steps"):
+    from glimpse.body.params import BodyParams
+    from glimpse.humans.person import initial_person
+    from glimpse.humans.visibility import BodyVisibility
+    from glimpse.prior import PriorContext, make_prior
+    from glimpse.prior.sds.identity import new_identity, save_identity
+    from glimpse.render.config import RenderConfig
+
+    sd, controlnet = write_tiny_weights(tmp_path / "weights")
+    config = replace(DIFFUSION, sd_path=str(sd), controlnet_path=str(controlnet), allow_cpu=True, start_at=10,
+                     resolution_px=RENDER_PX, early_resolution_px=RENDER_PX, combine=combine)
+    loaded = load_diffusion(config, torch.device("cpu"))
+    people = []
+    for k, pid in enumerate(("p0", "p1")):
+        frames = 3
+        pose = np.zeros((frames, 69))
+        pose[:, 47] = np.linspace(-0.5, 0.5, frames)  # a bent elbow that changes
+        body = BodyParams(np.arange(frames), np.zeros(10), np.zeros((frames, 3)), pose,
+                          np.tile([2.0 * k, 0.0, 0.0], (frames, 1)), 1.0, "free", np.zeros(frames, bool))
+        people.append(initial_person(pid, body_model.to(torch.float32), body, 30.0, BODY.skinning, 0.5, 0.9, 3, 1))
+        save_identity(new_identity(loaded, f"<person-{pid}>"), loaded,
+                      tmp_path / "05" / pid / "identity" / "identity.safetensors")
+    visibility = {p.pid: BodyVisibility.empty(body_model.num_vertices) for p in people}
+    context = PriorContext(people, visibility, body_model, RenderConfig("auto", 1, False), 0, lambda i: i,
+                           tmp_path / "05")
+    return make_prior("sds", context, {"sds": config}), people
+
+
+def test_an_sds_step_reaches_only_the_guided_persons_gaussians(tmp_path):
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    prior, people = _sds_prior(tmp_path, body_model)
+    assert prior.losses(0, people) == {} and list(prior.separate_losses(0)) == []  # before start_at
+    assert prior.recon_weight(0) == 1.0
+    assert prior.recon_weight(prior.start) == pytest.approx(1e6 * 0.98**2)
+    steps = list(prior.separate_losses(prior.start))
+    assert [index for index, _ in steps] == [0, 1]  # every person, in turn
+    index, loss = steps[0]
+    loss.backward()
+    guided, other = people[0].model, people[1].model
+    assert guided.sh_dc.grad.abs().sum() > 0 and guided.means.grad.abs().sum() > 0
+    assert other.sh_dc.grad is None and other.means.grad is None
+    again = prior.person_loss(prior.start, 0)
+    assert again.item() == pytest.approx(loss.item(), rel=1e-5)  # (seed, iteration, person) fix every draw
+
+
+def test_summed_sds_is_one_term_of_the_iterations_loss(tmp_path):
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    prior, people = _sds_prior(tmp_path, body_model, combine="summed")
+    terms = prior.losses(prior.start, people[:1])  # every person is guided, not only the view's
+    assert set(terms) == {"loss_sds"} and list(prior.separate_losses(prior.start)) == []
+    terms["loss_sds"].backward()
+    assert all(p.model.sh_dc.grad.abs().sum() > 0 for p in people)

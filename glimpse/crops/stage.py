@@ -62,9 +62,9 @@ class IdentityPlan:
     reason: str
 
 
-def identity_plan(kind: str) -> IdentityPlan:
-    """prior.kind -> the identity plan (``auto`` resolved as glimpse.prior does)."""
-    resolved = resolve_prior_kind(kind)
+def identity_plan(kind: str, diffusion_ready: bool = False) -> IdentityPlan:
+    """prior.kind -> the identity plan (``auto`` resolved as glimpse.prior does: sds when ``diffusion_ready``)."""
+    resolved = resolve_prior_kind(kind, diffusion_ready)
     if resolved == "sds":
         return IdentityPlan(resolved, "trained", "prior.kind is sds: each person's CustomDiffusion identity "
                                                  "is trained on their crops")

@@ -183,7 +183,14 @@ class PersonGaussians(nn.Module):
         degree = min(sh_degree, self.model.sh_degree)
         if self.frozen is not None and not torch.is_grad_enabled():
             return self._posed_frozen(frame_id, camera_centre, degree)
-        blended = self.blended_transforms(frame_id)
+        return self.posed_with(self.frame_transforms(frame_id), camera_centre, degree)
+
+    def posed_with(self, transforms: Tensor, camera_centre: Tensor, sh_degree: int) -> PosedGaussians:
+        """The Gaussians posed by the joints' skinning ``transforms [24, 4, 4]`` (any pose: a frame's, a new one
+        from joint_transforms, or the canonical rig.canonical_transforms), seen from ``camera_centre [3]`` in
+        the frame those transforms map into; differentiable in every Gaussian parameter."""
+        degree = min(sh_degree, self.model.sh_degree)
+        blended = canonical_to_posed(self.grid.lookup(self.model.means), transforms, self.rig.canonical_transforms)
         covariances = quat_scale_to_covariance(self.model.quats, self.model.scales())
         means, covariances = deform_gaussians(self.model.means, covariances, blended)
         colours = view_colours(blended, means, camera_centre, degree, self.model.sh())

@@ -4,9 +4,12 @@ background, trained together on the input frames.
 Each iteration renders one input frame (frames in a fresh seeded order every epoch) with every
 person present posed by that frame's (refined) pose, in one rasterizer call, and minimises
 
-    mse * MSE + dssim * D-SSIM + lpips * LPIPS              (over pixels no static occluder hides)
-  + hard_surface * sum_k mean(hard_surface(alpha_k))         (each person's alpha, same pixels)
+    lambda_recon * (mse * MSE + dssim * D-SSIM + lpips * LPIPS   (over pixels no static occluder hides)
+                    + hard_surface * sum_k mean(hard_surface(alpha_k)))  (each person's alpha, same pixels)
   + the prior's terms
+
+(lambda_recon = 1 unless the prior schedules it: the sds prior's 1e6 tau_max^2); then the prior's
+separate losses, if any, each take their own step on one person's optimiser (the official SDS).
 
 Schedule (all scaled by schedule_scale): human means fixed and opacities >= early_min_opacity
 until fix_centres_until; human densification at densify_at; pruning of transparent, large or
@@ -188,26 +191,46 @@ class JointTrainer:
         present = list(gaussians.rows)
         total, terms = self._loss(step, view, out, present)
         total.backward()
+        fixed = config.centres_fixed_at(step)
         with torch.no_grad():
+            weight = self.prior.recon_weight(step)  # densification reads gradients of the unweighted loss
             for k, rows in gaussians.rows.items():
                 if out.means2d.grad is not None:
-                    self.stats[k].update(out.means2d.grad[rows], out.radii[rows], view.camera.width,
+                    self.stats[k].update(out.means2d.grad[rows] / weight, out.radii[rows], view.camera.width,
                                          view.camera.height)
-            fixed = config.centres_fixed_at(step)
-            if fixed:
-                for person in self.people:
-                    person.model.means.grad = None
-            for optimizer in self._optimizers():
-                optimizer.step()
-                optimizer.zero_grad(set_to_none=True)
-            if fixed and config.early_min_opacity > 0:
-                for person in self.people:
-                    person.model.opacity_logits.clamp_(min=logit(config.early_min_opacity))
+            self._step(self._optimizers(), fixed)
+        separate = self._separate_steps(step, fixed)
+        with torch.no_grad():
             self._density_control(step, view.camera.height)
         self.step = step
         values = {name: float(value.detach()) for name, value in terms.items()}
-        values["total"] = float(total.detach())
+        values.update(separate)
+        values["total"] = float(total.detach()) + sum(separate.values())
         return values
+
+    @torch.no_grad()
+    def _step(self, optimizers: list, fixed: bool) -> None:
+        """One step of ``optimizers``; while the human centres are fixed their means do not move and their
+        opacities stay at or above early_min_opacity."""
+        if fixed:
+            for person in self.people:
+                person.model.means.grad = None
+        for optimizer in optimizers:
+            optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
+        if fixed and self.config.early_min_opacity > 0:
+            for person in self.people:
+                person.model.opacity_logits.clamp_(min=logit(self.config.early_min_opacity))
+
+    def _separate_steps(self, step: int, fixed: bool) -> dict[str, float]:
+        """The prior's own per-person steps after the iteration's (the official code's SDS): each loss
+        backpropagated alone and that person's optimiser stepped; {"loss_<prior>_separate": their sum}."""
+        total, count = 0.0, 0
+        for index, loss in self.prior.separate_losses(step):
+            loss.backward()
+            self._step([self.person_optimizers[index]], fixed)
+            total, count = total + float(loss.detach()), count + 1
+        return {f"loss_{self.prior.name}_separate": total} if count else {}
 
     def _loss(self, step: int, view: JointView, out: RenderOutput, present: list[int]) -> tuple[Tensor, dict]:
         """The total loss and its unweighted terms (the prior's come weighted) for one render."""
@@ -217,6 +240,7 @@ class JointTrainer:
         if present and weights.hard_surface > 0:
             terms["hard_surface"] = sum(hard_surface_loss(out.group_alpha[1 + k], view.keep) for k in present)
             total = total + weights.hard_surface * terms["hard_surface"]
+        total = self.prior.recon_weight(step) * total  # the hard-surface term stays 0.1 of it (paper)
         prior_terms = self.prior.losses(step, [self.people[k] for k in present])
         terms.update(prior_terms)
         return total + sum(prior_terms.values()), terms

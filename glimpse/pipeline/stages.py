@@ -68,7 +68,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute", "body", "render", "prior", "prior_surface"),
+        shared=("compute", "body", "render", "prior", "prior_surface", "diffusion"),
         scene_inputs=(),
     ),
     StageSpec(

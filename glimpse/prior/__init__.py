@@ -12,24 +12,25 @@ from typing import Any
 from glimpse.errors import ConfigError
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.none import NoPrior
+from glimpse.prior.sds.prior import SDSPrior
 from glimpse.prior.surface import SurfacePrior
 
-PRIORS: dict[str, type[UnseenPrior]] = {NoPrior.name: NoPrior, SurfacePrior.name: SurfacePrior}
+PRIORS: dict[str, type[UnseenPrior]] = {NoPrior.name: NoPrior, SurfacePrior.name: SurfacePrior, SDSPrior.name: SDSPrior}
 AUTO_ORDER = ("sds", "surface", "none")
-PLANNED = {"sds": "issue #12 (the diffusion prior)"}
+PLANNED: dict[str, str] = {}
 
 
-def resolve_prior_kind(kind: str) -> str:
-    """``auto`` -> the first registered of sds (which will also need diffusion weights and CUDA),
-    surface, none; any other kind is returned as given."""
+def resolve_prior_kind(kind: str, diffusion_ready: bool = False) -> str:
+    """``auto`` -> sds when ``diffusion_ready`` (weights configured and CUDA present, CONTRACTS.md), else the
+    first registered of surface, none; any other kind is returned as given."""
     if kind != "auto":
         return kind
-    return next(name for name in AUTO_ORDER if name in PRIORS)
+    return next(name for name in AUTO_ORDER if name in PRIORS and (name != "sds" or diffusion_ready))
 
 
-def check_prior_kind(kind: str) -> str:
+def check_prior_kind(kind: str, diffusion_ready: bool = False) -> str:
     """The resolved kind, or a ConfigError naming what is registered."""
-    name = resolve_prior_kind(kind)
+    name = resolve_prior_kind(kind, diffusion_ready)
     if name in PRIORS:
         return name
     if name in PLANNED:
@@ -40,8 +41,8 @@ def check_prior_kind(kind: str) -> str:
 
 
 def make_prior(kind: str, context: PriorContext, settings: dict[str, Any]) -> UnseenPrior:
-    """The prior registered under ``kind`` (after resolving ``auto``), built with ``settings[name]`` (its
-    pipeline.yaml section; None when it has none)."""
+    """The prior registered under the resolved ``kind``, built with ``settings[name]`` (its pipeline.yaml
+    section; None when it has none)."""
     name = check_prior_kind(kind)
     return PRIORS[name](context, settings.get(name))
 

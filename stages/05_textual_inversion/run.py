@@ -28,7 +28,9 @@ from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.crops.stage import CROPS_FORMAT, CropsInputs, identity_plan, person_summary, write_crops  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
-from glimpse.prior.sds.load import check_weight_paths, diffusion_device, load_diffusion  # noqa: E402
+from glimpse.prior.sds.load import (  # noqa: E402
+    check_weight_paths, diffusion_device, diffusion_ready, load_diffusion,
+)
 from glimpse.prior.sds.person_identity import identity_formats, train_identities  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -38,10 +40,10 @@ STAGE = "05_textual_inversion"
 def run(ctx: StageContext) -> None:
     config = ctx.section(STAGE)
     compute = ctx.section("compute")
-    plan = identity_plan(ctx.section("prior").kind)
+    diffusion = ctx.section("diffusion")
+    plan = identity_plan(ctx.section("prior").kind, diffusion_ready(diffusion, resolve_device(compute)))
     apply_compute(compute)
     if plan.identity == "trained":  # before any work: missing weights or no CUDA stop the stage here
-        diffusion = ctx.section("diffusion")
         check_weight_paths(diffusion)
         diffusion_device(diffusion, resolve_device(compute))
     scene = load_scene(ctx.scene_root)

@@ -37,6 +37,7 @@ from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
 from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.prior import check_prior_kind  # noqa: E402
+from glimpse.prior.sds.load import check_weight_paths, diffusion_device, diffusion_ready  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "06_joint_opt"
@@ -45,7 +46,11 @@ UPSTREAM = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_i
 
 def run(ctx: StageContext) -> None:
     config, render, body, compute = (ctx.section(name) for name in (STAGE, "render", "body", "compute"))
-    prior_kind = check_prior_kind(ctx.section("prior").kind)
+    diffusion = ctx.section("diffusion")
+    prior_kind = check_prior_kind(ctx.section("prior").kind, diffusion_ready(diffusion, resolve_device(compute)))
+    if prior_kind == "sds":  # before any work: missing weights or no CUDA stop the stage here
+        check_weight_paths(diffusion)
+        diffusion_device(diffusion, resolve_device(compute))
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     dirs = {name: ctx.upstream_dir(name) for name in UPSTREAM}
@@ -58,8 +63,8 @@ def run(ctx: StageContext) -> None:
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in dirs.values()])
     with ctx.timed("train"):
         result = train_joint(inputs, config, render, body, body_model, prior_kind,
-                             {"surface": ctx.section("prior_surface")}, compute.seed, resolve_device(compute),
-                             ctx.work, key, ctx.out)
+                             {"surface": ctx.section("prior_surface"), "sds": diffusion}, compute.seed,
+                             resolve_device(compute), ctx.work, key, ctx.out, dirs["05_textual_inversion"])
     for person in result.people:
         folder = ctx.out / "humans" / person.pid
         folder.mkdir(parents=True, exist_ok=True)

@@ -79,21 +79,19 @@ def zoomed_camera(points: np.ndarray, azimuth_deg: float, radius: float, crop_sc
     return PinholeCamera(K, camera.R, camera.t)
 
 
-def sample_view(step: int, config: SDSCameraConfig, posed: np.ndarray, labels: np.ndarray, pelvis: np.ndarray,
-                canonical_pelvis: np.ndarray, scale: float, size: int, rng: np.random.Generator) -> SDSView:
-    """One SDS camera at SDS step ``step`` for a person whose observed pose (body frame, no root rotation) has
-    vertices ``posed [V, 3]`` and pelvis ``pelvis [3]``; ``canonical_pelvis [3]`` is the Da-pose's;
+def sample_view(kind: str, config: SDSCameraConfig, vertices: np.ndarray, labels: np.ndarray, pelvis: np.ndarray,
+                scale: float, size: int, rng: np.random.Generator) -> SDSView:
+    """A camera of ``kind`` (view_kind) around a body with vertices ``vertices [V, 3]`` and pelvis ``pelvis [3]``
+    in the body frame (an observed pose with no root rotation, or the canonical one for ``canonical``);
     ``labels [V]`` each vertex's joint (skinning argmax); ``scale`` the person's size factor."""
-    kind = view_kind(step, config, rng)
     azimuth = float(rng.uniform(-180.0, 180.0))
     if kind in ZOOMED:
-        part = posed[np.isin(labels, PART_JOINTS[kind])]
+        part = vertices[np.isin(labels, PART_JOINTS[kind])]
         camera = zoomed_camera(part, azimuth, config.zoom_radius_m * scale, config.zoom_scale[kind], size)
         return SDSView(kind, camera, size, azimuth, 0.0)
     low, high = config.elevation_deg
     elevation = float(rng.uniform(low, high))
-    centre = canonical_pelvis if kind == "canonical" else pelvis
-    camera = orbit_camera(centre, azimuth, elevation, config.radius_m * scale, config.fovy_deg, size)
+    camera = orbit_camera(pelvis, azimuth, elevation, config.radius_m * scale, config.fovy_deg, size)
     return SDSView(kind, camera, size, azimuth, elevation)
 
 

@@ -55,6 +55,11 @@ def check_weight_paths(config: DiffusionConfig) -> tuple[Path, Path]:
     return sd, controlnet
 
 
+def diffusion_ready(config: DiffusionConfig, device: torch.device) -> bool:
+    """Whether ``prior.kind: auto`` picks sds: both weight paths set and a CUDA device (CONTRACTS.md)."""
+    return bool(config.sd_path and config.controlnet_path) and device.type == "cuda"
+
+
 def diffusion_device(config: DiffusionConfig, device: torch.device) -> tuple[torch.device, torch.dtype]:
     """Where and in what precision SDS runs: CUDA (fp16 when half_precision), or the CPU in fp32 only when
     allow_cpu; otherwise a GlimpseError."""
@@ -92,12 +97,13 @@ def load_diffusion(config: DiffusionConfig, device: torch.device) -> DiffusionMo
     with hub_offline():
         try:
             options = {"local_files_only": True, "torch_dtype": dtype}
-            unet = UNet2DConditionModel.from_pretrained(sd, subfolder="unet", **options)
-            vae = AutoencoderKL.from_pretrained(sd, subfolder="vae", **options)
+            plain = {**options, "low_cpu_mem_usage": False}  # (true needs the accelerate package)
+            unet = UNet2DConditionModel.from_pretrained(sd, subfolder="unet", **plain)
+            vae = AutoencoderKL.from_pretrained(sd, subfolder="vae", **plain)
             text_encoder = CLIPTextModel.from_pretrained(sd, subfolder="text_encoder", **options)
             tokenizer = CLIPTokenizer.from_pretrained(sd, subfolder="tokenizer", local_files_only=True)
             scheduler = DDPMScheduler.from_pretrained(sd, subfolder="scheduler", local_files_only=True)
-            controlnet = ControlNetModel.from_pretrained(controlnet_dir, **options)
+            controlnet = ControlNetModel.from_pretrained(controlnet_dir, **plain)
         except (OSError, ValueError) as error:
             raise GlimpseError(f"diffusion weights could not be read from {sd} and {controlnet_dir}: {error}") from error
     for module in (unet, vae, text_encoder, controlnet):

@@ -18,6 +18,9 @@ OPPOSITE_VIEW = {"front": "back", "back": "front"}
 
 @dataclass(frozen=True)
 class PromptConfig:
+    template: str           # with {token} and {view} (as stage 05's prompt_template)
+    front_max_deg: float    # azimuths below this are "front" views (as stage 05's)
+    back_min_deg: float     # above this "back"; between the two "side"
     quality: str            # appended after the view ("high quality, 8k uhd, realistic")
     negative: str           # the negative prompt ("two people, low quality, ...")
     part_words: dict[str, str]  # zoomed view kind -> words added after the view ("head": "head")
@@ -37,10 +40,10 @@ def without_token(text: str, token: str) -> str:
     return " ".join(text.replace(token, "").split()).replace(" ,", ",")
 
 
-def view_prompts(template: str, pid: str, view: str, part: str, config: PromptConfig) -> ViewPrompts:
+def view_prompts(pid: str, view: str, part: str, config: PromptConfig) -> ViewPrompts:
     """Prompts for person ``pid`` seen from ``view`` (front/side/back); ``part`` is the camera's kind (full,
     canonical, head, upper, lower): the zoomed kinds add their words."""
-    words = [view_prompt(template, pid, view)]
+    words = [view_prompt(config.template, pid, view)]
     if part in config.part_words:
         words.append(config.part_words[part])
     if config.quality:
