@@ -70,7 +70,7 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
     """Median seconds of one forward+backward render of stage 06's final Gaussians (background and every
     person present) from the first input view, and how many Gaussians that render has."""
     model = GaussianModel.from_splats(read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")[0])
-    people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
+    people = trained_people(run_dir)
     width, height, cameras = read_cameras_json(run_dir / "01_sfm" / "cameras.json")
     frame = min(f for f in cameras if any(p.in_frame(f) for p in people))
     camera = render_camera(cameras[frame], width, height, torch.device("cpu"))
@@ -115,19 +115,21 @@ def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
     return total, large, needles
 
 
-def hole_shares(run_dir: Path) -> str:
+def trained_people(run_dir: Path) -> list:
+    """Stage 06's people of a run, loaded once for the holes and the turntables."""
+    return load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
+
+
+def hole_shares(people: list) -> str:
     """Per person, the % of their canonical body silhouette their Gaussians leave see-through (alpha < 0.5,
     glimpse.eval.coverage), e.g. "p0 2.4, p1 0.8"."""
-    model = BodyModel.from_file(BODY_MODEL)
-    people = load_trained_people(run_dir / "06_joint_opt" / "humans", model)
-    faces, device = model.faces.numpy(), torch.device("cpu")
+    faces, device = BodyModel.from_file(BODY_MODEL).faces.numpy(), torch.device("cpu")
     return ", ".join(f"{p.pid} {100 * canonical_hole_share(p, faces, CoverageConfig(), RENDER.backend, device):.1f}"
                      for p in people)
 
 
-def turntables(run_dir: Path, picture: Path) -> None:
+def turntables(people: list, picture: Path) -> None:
     """Every person's canonical Gaussians from TURNTABLE_VIEWS azimuths (elevation 0), one row per person."""
-    people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
     rows = [np.concatenate(list(canonical_turntable(person, RENDER.sh_degree, TURNTABLE_VIEWS, TURNTABLE_PX,
                                                     TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG, RENDER.backend,
                                                     torch.device("cpu"))), axis=1) for person in people]
@@ -157,16 +159,17 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
             composite = tables["composite"]["rows"][0]
             counts = ", ".join(str(p["gaussians"]) for p in report["people"].values())
             total, large, needles = hedgehogs(run_dir)
+            people_of_run = trained_people(run_dir)
             never = (f"{unseen[0]['psnr']:.2f} | {unseen[0]['ssim']:.4f} | {unseen[0]['lpips']:.2f}" if unseen
                      else "- | - | -")
             print(f"| {scenario} | {report['prior']} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
                   f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {never} | {per_person} | "
                   f"{composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | {large} / {needles} of {total} | "
-                  f"{hole_shares(run_dir)} | {report['iterations_per_s']:.2f} |", flush=True)
+                  f"{hole_shares(people_of_run)} | {report['iterations_per_s']:.2f} |", flush=True)
             if prior == priors[0]:
                 baselines.append((scenario, humans[1:], unseen[1:]))
             if pictures is not None:
-                turntables(run_dir, pictures / f"turntable_{scenario}_{prior}.png")
+                turntables(people_of_run, pictures / f"turntable_{scenario}_{prior}.png")
     print("\nBaselines (same views and protocol):\n")
     print("| scenario | baseline | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 |")
     print("|---|---|---|---|---|---|---|---|")

@@ -39,6 +39,7 @@ SD15_VAE = dict(in_channels=3, out_channels=3, latent_channels=4, block_out_chan
                 layers_per_block=2, sample_size=512)
 TEXT_TOKENS, TEXT_DIM = 77, 768
 GUIDANCE, CONTROLNET_SCALE, TIMESTEP = 50.0, 0.7, 500
+CPU_THREADS = 2
 
 
 class _NoTokenizer:
@@ -92,7 +93,8 @@ def main() -> int:
     resolution = 256 if quick else 512
     size = min(args.size, resolution) if quick else args.size
     warmup, repeats = (0, 1) if quick else (2, 5)
-    torch.set_num_threads(2) if device.type == "cpu" else None
+    if device.type == "cpu":
+        torch.set_num_threads(CPU_THREADS)
     models = build(device, dtype)
     text = SDSText(*(torch.randn(1, TEXT_TOKENS, TEXT_DIM, device=device, dtype=dtype) for _ in range(3)))
     config = SDSConfig(GUIDANCE, CONTROLNET_SCALE, resolution)
@@ -116,7 +118,8 @@ def main() -> int:
     before = peak_mb(device)
     base_s = timed(baseline, device, warmup, repeats)
     step_s = timed(step, device, warmup, repeats)
-    print(f"device {device} ({torch.cuda.get_device_name(device) if device.type == 'cuda' else 'CPU, 2 threads'}), "
+    machine = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU, {CPU_THREADS} threads"
+    print(f"device {device} ({machine}), "
           f"{str(dtype).removeprefix('torch.')}, SD 1.5-sized random models\n")
     memory = "peak allocated MB" if device.type == "cuda" else "memory growth MB"
     print(f"| what | render px | diffusion px | ms | vs guided prediction | {memory} |")

@@ -17,7 +17,7 @@ import torch
 from glimpse.background.stage import render_camera
 from glimpse.humans.person import PersonGaussians
 from glimpse.masks.assign import disk
-from glimpse.prior.orbit import turn_cameras
+from glimpse.prior.orbit import box_centre, turn_cameras
 from glimpse.render import rasterize
 from glimpse.render.mesh_raster import rasterize_triangles
 
@@ -39,7 +39,7 @@ def canonical_hole_share(person: PersonGaussians, faces: np.ndarray, config: Cov
     the rig's canonical vertices), over every view, that their Gaussians leave more transparent than
     ``config.alpha_below``."""
     points = person.rig.canonical_vertices.double().cpu().numpy()
-    centre = 0.5 * (points.min(0) + points.max(0))
+    centre = box_centre(points)
     size = config.size_px
     holes = pixels = 0
     for pinhole in turn_cameras(np.tile(centre, (config.views, 1)), config.radius_m, config.fovy_deg, size):

@@ -34,6 +34,11 @@ class OrbitView:
     elevation_deg: float
 
 
+def box_centre(points: np.ndarray) -> np.ndarray:
+    """[3] the centre of the axis-aligned box around ``points [N, 3]`` (what orbits and turntables circle)."""
+    return 0.5 * (points.min(0) + points.max(0))
+
+
 def orbit_camera(centre: np.ndarray, azimuth_deg: float, elevation_deg: float, radius: float, fovy_deg: float,
                  size: int) -> PinholeCamera:
     """An OpenCV camera ``radius`` from ``centre [3]`` (canonical frame) looking at it, level with the body's up."""

@@ -41,7 +41,7 @@ from glimpse.masks.assign import disk
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
-from glimpse.prior.orbit import sample_orbit_views
+from glimpse.prior.orbit import box_centre, sample_orbit_views
 from glimpse.render import Camera, rasterize
 from glimpse.render.mesh_raster import rasterize_triangles
 from glimpse.render.sh import sh_dc_to_rgb
@@ -99,7 +99,7 @@ class SurfacePrior(UnseenPrior):
 
     def _silhouette_views(self, vertices: Tensor, faces: np.ndarray, rng: np.random.Generator) -> list[SilhouetteView]:
         points = vertices.double().cpu().numpy()
-        centre = 0.5 * (points.min(0) + points.max(0))
+        centre = box_centre(points)
         orbit, device = self.config.orbit, vertices.device
         margin_px = self.config.silhouette_margin_m * (0.5 * orbit.size_px / np.tan(np.radians(orbit.fovy_deg) / 2)
                                                        ) / orbit.radius_m

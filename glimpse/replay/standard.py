@@ -25,7 +25,7 @@ from glimpse.eval.views import ScoredView
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.video import write_mp4
-from glimpse.prior.orbit import turn_cameras
+from glimpse.prior.orbit import box_centre, turn_cameras
 from glimpse.render import rasterize
 from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
@@ -61,7 +61,7 @@ def canonical_turntable(person: PersonGaussians, sh_degree: int, frames: int, si
     """[size, size, 3] uint8 renders of the person alone in canonical pose from ``frames`` azimuths evenly
     spread over a turn (0 = the front), elevation 0, ``radius_m`` from the body's centre, on white."""
     points = person.rig.canonical_vertices.cpu().numpy()
-    centre = 0.5 * (points.min(0) + points.max(0))
+    centre = box_centre(points)
     for pinhole in turn_cameras(np.tile(centre, (frames, 1)), radius_m, fovy_deg, size):
         rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(sh_degree),
                         background=torch.ones(3, device=device), backend=backend).rgb

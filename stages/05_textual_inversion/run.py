@@ -40,12 +40,12 @@ STAGE = "05_textual_inversion"
 def run(ctx: StageContext) -> None:
     config = ctx.section(STAGE)
     compute = ctx.section("compute")
-    diffusion = ctx.section("diffusion")
-    plan = identity_plan(ctx.section("prior").kind, diffusion_ready(diffusion, resolve_device(compute)))
+    diffusion, device = ctx.section("diffusion"), resolve_device(compute)
+    plan = identity_plan(ctx.section("prior").kind, diffusion_ready(diffusion, device))
     apply_compute(compute)
     if plan.identity == "trained":  # before any work: missing weights or no CUDA stop the stage here
         check_weight_paths(diffusion)
-        diffusion_device(diffusion, resolve_device(compute))
+        diffusion_device(diffusion, device)
     scene = load_scene(ctx.scene_root)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")
@@ -64,7 +64,7 @@ def run(ctx: StageContext) -> None:
     if plan.identity == "trained":
         with ctx.timed("identity"):
             references = {pid: scene.humans[pid].references for pid in pids}
-            summaries = train_identities(load_diffusion(diffusion, resolve_device(compute)), docs, references,
+            summaries = train_identities(load_diffusion(diffusion, device), docs, references,
                                          config.identity, compute.seed, ctx.out)
         for pid, summary in summaries.items():
             ctx.summary["people"][pid]["identity"] = summary

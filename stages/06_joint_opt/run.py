@@ -46,11 +46,11 @@ UPSTREAM = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_i
 
 def run(ctx: StageContext) -> None:
     config, render, body, compute = (ctx.section(name) for name in (STAGE, "render", "body", "compute"))
-    diffusion = ctx.section("diffusion")
-    prior_kind = check_prior_kind(ctx.section("prior").kind, diffusion_ready(diffusion, resolve_device(compute)))
+    diffusion, device = ctx.section("diffusion"), resolve_device(compute)
+    prior_kind = check_prior_kind(ctx.section("prior").kind, diffusion_ready(diffusion, device))
     if prior_kind == "sds":  # before any work: missing weights or no CUDA stop the stage here
         check_weight_paths(diffusion)
-        diffusion_device(diffusion, resolve_device(compute))
+        diffusion_device(diffusion, device)
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     dirs = {name: ctx.upstream_dir(name) for name in UPSTREAM}
@@ -63,8 +63,8 @@ def run(ctx: StageContext) -> None:
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in dirs.values()])
     with ctx.timed("train"):
         result = train_joint(inputs, config, render, body, body_model, prior_kind,
-                             {"surface": ctx.section("prior_surface"), "sds": diffusion}, compute.seed,
-                             resolve_device(compute), ctx.work, key, ctx.out, dirs["05_textual_inversion"])
+                             {"surface": ctx.section("prior_surface"), "sds": diffusion}, compute.seed, device,
+                             ctx.work, key, ctx.out, dirs["05_textual_inversion"])
     for person in result.people:
         folder = ctx.out / "humans" / person.pid
         folder.mkdir(parents=True, exist_ok=True)

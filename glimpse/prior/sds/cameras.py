@@ -22,9 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from glimpse.cameras.model import PinholeCamera
-from glimpse.prior.orbit import orbit_camera
+from glimpse.prior.orbit import box_centre, orbit_camera
 
 VIEW_KINDS = ("full", "canonical", "head", "upper", "lower")
+PLACEHOLDER_FOVY_DEG = 90.0  # a zoomed camera's pose comes from the orbit; its focal length is fitted after
+MIN_HALF_EXTENT = 1e-6  # tangent of half the zoomed view: a part collapsed to a point still gets a camera
 ZOOMED = ("head", "upper", "lower")
 # body parts of the zoomed views, as SMPL joints whose vertices (skinning weights' argmax) they take
 PART_JOINTS = {
@@ -69,11 +71,11 @@ def zoomed_camera(points: np.ndarray, azimuth_deg: float, radius: float, crop_sc
                   size: int) -> PinholeCamera:
     """A camera at elevation 0 and ``azimuth_deg`` looking at the centre of ``points [N, 3]`` (a body part,
     body frame) from ``radius``, its field of view fitted to the points' projected extent x ``crop_scale``."""
-    centre = 0.5 * (points.min(0) + points.max(0))
-    camera = orbit_camera(centre, azimuth_deg, 0.0, radius, 90.0, size)
+    centre = box_centre(points)
+    camera = orbit_camera(centre, azimuth_deg, 0.0, radius, PLACEHOLDER_FOVY_DEG, size)
     local = points @ camera.R.T + camera.t
     half = float(np.max(np.abs(local[:, :2] / local[:, 2:3]))) * crop_scale
-    focal = 0.5 * size / max(half, 1e-6)
+    focal = 0.5 * size / max(half, MIN_HALF_EXTENT)
     K = camera.K.copy()
     K[0, 0] = K[1, 1] = focal
     return PinholeCamera(K, camera.R, camera.t)

@@ -70,12 +70,33 @@ class SDSText:
     negative: Tensor
 
 
-@torch.no_grad()
-def encode_text(models: DiffusionModels, texts: list[str]) -> Tensor:
-    """[len(texts), L, D] the text encoder's last hidden states, padded to the tokenizer's length."""
+def text_states(models: DiffusionModels, texts: list[str]) -> Tensor:
+    """[len(texts), L, D] the text encoder's last hidden states, padded to the tokenizer's length (with
+    gradients, where the encoder has any: identity training)."""
     tokens = models.tokenizer(texts, padding="max_length", max_length=models.tokenizer.model_max_length,
                               truncation=True, return_tensors="pt").input_ids.to(models.device)
     return models.text_encoder(tokens)[0].to(models.dtype)
+
+
+@torch.no_grad()
+def encode_text(models: DiffusionModels, texts: list[str]) -> Tensor:
+    """text_states without gradients."""
+    return text_states(models, texts)
+
+
+def encode_view_text(models: DiffusionModels, unet: str, controlnet: str, negative: str) -> SDSText:
+    """The three prompts of one view, encoded."""
+    encoded = encode_text(models, [unet, controlnet, negative])
+    return SDSText(encoded[0:1], encoded[1:2], encoded[2:3])
+
+
+def add_noise(models: DiffusionModels, latents: Tensor, noise: Tensor, timesteps: Tensor | int) -> Tensor:
+    """The forward diffusion: sqrt(alpha_bar_t) latents + sqrt(1 - alpha_bar_t) noise, per sample for a
+    [B] tensor of timesteps."""
+    alpha_bar = models.alphas_cumprod[timesteps].to(latents.dtype)
+    if alpha_bar.dim() == 1:
+        alpha_bar = alpha_bar[:, None, None, None]
+    return alpha_bar.sqrt() * latents + (1.0 - alpha_bar).sqrt() * noise
 
 
 def encode_images(models: DiffusionModels, rgb: Tensor) -> Tensor:
@@ -113,7 +134,7 @@ def sds_loss(models: DiffusionModels, rgb: Tensor, skeleton: Tensor, text: SDSTe
     noise = torch.randn(latents.shape, generator=generator, device=generator.device).to(latents)
     alpha_bar = models.alphas_cumprod[timestep].to(latents.dtype)
     with torch.no_grad():
-        noisy = alpha_bar.sqrt() * latents + (1.0 - alpha_bar).sqrt() * noise
+        noisy = add_noise(models, latents, noise, timestep)
         guided = predicted_noise(models, noisy, timestep, skeleton, text, config)
         grad = torch.nan_to_num((1.0 - alpha_bar) * (guided - noise), nan=0.0, posinf=0.0, neginf=0.0)
         target = latents - grad

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 
 from glimpse.crops.view import person_token
-from glimpse.io.images import read_rgb
-from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, SDSText, encode_text, predicted_noise
-from glimpse.prior.sds.identity import IdentitySwitch, PersonIdentity
+from glimpse.io.images import read_rgb, write_png
+from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, encode_view_text, predicted_noise
+from glimpse.prior.sds.identity import IDENTITY_FORMAT, IdentitySwitch, PersonIdentity, new_identity, save_identity
 from glimpse.prior.sds.prompts import without_token
 from glimpse.prior.sds.train_identity import IdentityConfig, IdentityExample, SampleConfig, train_identity
 
@@ -28,7 +29,7 @@ SAMPLES_FILE = "samples.png"
 LOSS_SUMMARY_FRACTION = 0.1  # the summary's first / last loss: means over this share of the steps
 PERSON_SEED_STRIDE = 1_000_003  # person k of a run seeded s draws from seed s * stride + k
 
-def _unit(pixels: np.ndarray) -> torch.Tensor:
+def unit_image(pixels: np.ndarray) -> torch.Tensor:
     """[H, W, 3] uint8 -> [3, H, W] float in 0..1."""
     return torch.as_tensor(pixels, dtype=torch.float32).permute(2, 0, 1) / COLOUR_LEVELS
 
@@ -41,8 +42,8 @@ def crop_examples(crops_dir: Path, doc: dict) -> list[IdentityExample]:
     for entry in doc["crops"]:
         name = entry["file"]
         mask = read_rgb(crops_dir / "masks" / name)[..., 0].astype(np.float32) / COLOUR_LEVELS
-        examples.append(IdentityExample(_unit(read_rgb(crops_dir / "images" / name)), torch.as_tensor(mask),
-                                        _unit(read_rgb(crops_dir / "skeletons" / name)), entry["prompt"],
+        examples.append(IdentityExample(unit_image(read_rgb(crops_dir / "images" / name)), torch.as_tensor(mask),
+                                        unit_image(read_rgb(crops_dir / "skeletons" / name)), entry["prompt"],
                                         without_token(entry["prompt"], token)))
     return examples
 
@@ -50,8 +51,6 @@ def crop_examples(crops_dir: Path, doc: dict) -> list[IdentityExample]:
 def reference_examples(paths: list[Path], pid: str, size: int, prompt_template: str) -> list[IdentityExample]:
     """Examples from reference photos: centred square crop, ``size`` pixels, mask everywhere, no skeleton;
     ``prompt_template`` with {token}."""
-    import cv2
-
     token = person_token(pid)
     prompt = prompt_template.format(token=token)
     examples = []
@@ -61,7 +60,7 @@ def reference_examples(paths: list[Path], pid: str, size: int, prompt_template: 
         side = min(height, width)
         top, left = (height - side) // 2, (width - side) // 2
         square = cv2.resize(image[top:top + side, left:left + side], (size, size), interpolation=cv2.INTER_AREA)
-        examples.append(IdentityExample(_unit(square), torch.ones(size, size), torch.zeros(3, size, size), prompt,
+        examples.append(IdentityExample(unit_image(square), torch.ones(size, size), torch.zeros(3, size, size), prompt,
                                         without_token(prompt, token)))
     return examples
 
@@ -84,8 +83,7 @@ def sample_grid(models: DiffusionModels, identity: PersonIdentity, examples: lis
     tiles = []
     try:
         for example in chosen:
-            encoded = encode_text(models, [example.prompt, example.control_prompt, ""])
-            text = SDSText(encoded[0:1], encoded[1:2], encoded[2:3])
+            text = encode_view_text(models, example.prompt, example.control_prompt, "")
             shape = (1, models.unet.config.in_channels, size // models.vae_scale_factor, size // models.vae_scale_factor)
             latents = torch.randn(shape, generator=generator).to(models.device, models.dtype)
             skeleton = example.skeleton[None].to(models.device, models.dtype)
@@ -103,9 +101,6 @@ def train_person_identity(models: DiffusionModels, pid: str, crops_dir: Path, do
                           config: IdentityConfig, seed: int, out: Path) -> dict:
     """Train, save (``out/identity.safetensors``) and sample (``out/samples.png``) one person's identity;
     returns its summary for the manifest."""
-    from glimpse.io.images import write_png
-    from glimpse.prior.sds.identity import new_identity, save_identity
-
     examples = crop_examples(crops_dir, doc)
     examples += reference_examples(references, pid, doc["crop_size_px"], config.reference_prompt)
     if not examples:
@@ -135,8 +130,6 @@ def train_identities(models: DiffusionModels, docs: dict[str, dict], references:
 
 def identity_formats(out: Path, pids: list[str]) -> dict[str, str]:
     """The manifest's format entries of the identity files written under ``out``."""
-    from glimpse.prior.sds.identity import IDENTITY_FORMAT
-
     formats = {}
     for pid in pids:
         if (out / pid / "identity" / IDENTITY_FILE).is_file():

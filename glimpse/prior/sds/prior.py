@@ -41,16 +41,15 @@ from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
 from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.prior.sds.control import skeleton_image
-from glimpse.prior.sds.guidance import SDSConfig, SDSText, encode_text, sds_loss
+from glimpse.prior.sds.guidance import SDSConfig, SDSText, encode_view_text, sds_loss
 from glimpse.prior.sds.identity import IdentitySwitch, load_identity
 from glimpse.prior.sds.load import load_diffusion
-from glimpse.prior.sds.person_identity import IDENTITY_FILE
+from glimpse.prior.sds.person_identity import IDENTITY_FILE, unit_image
 from glimpse.prior.sds.prompts import view_prompts
 from glimpse.prior.sds.schedule import recon_weight, sample_timestep
 from glimpse.render import rasterize
 
 PELVIS = 0
-COLOUR_LEVELS = 255.0
 STEP_SEED_STRIDE = 1_000_003  # (seed, iteration, person) -> one random stream
 
 
@@ -101,8 +100,7 @@ class SDSPrior(UnseenPrior):
         key = (pid, view, kind)
         if key not in self.texts:
             prompts = view_prompts(pid, view, kind, self.config.prompt)
-            encoded = encode_text(self.models, [prompts.unet, prompts.controlnet, prompts.negative])
-            self.texts[key] = SDSText(encoded[0:1], encoded[1:2], encoded[2:3])
+            self.texts[key] = encode_view_text(self.models, prompts.unet, prompts.controlnet, prompts.negative)
         return self.texts[key]
 
     # --- one person's SDS step -----------------------------------------------------------------------
@@ -152,7 +150,7 @@ class SDSPrior(UnseenPrior):
             keypoints = self.keypoints(torch.as_tensor(joints[None]), torch.as_tensor(vertices[None]))[0].numpy()
         image, _, _ = skeleton_image(keypoints, joints[HEAD_JOINT], PinholeCamera(K, camera.R, camera.t), resolution,
                                      self.config.skeleton_line_px)
-        return (torch.as_tensor(image, device=self.device).permute(2, 0, 1)[None].float() / COLOUR_LEVELS)
+        return unit_image(image)[None].to(self.device)
 
     # --- the prior's interface ------------------------------------------------------------------------
 

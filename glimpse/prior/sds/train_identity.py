@@ -19,8 +19,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from glimpse.errors import ConfigError
-
-from glimpse.prior.sds.guidance import DiffusionModels, encode_images, encode_text
+from glimpse.prior.sds.guidance import DiffusionModels, add_noise, encode_images, encode_text, text_states
 from glimpse.prior.sds.identity import IdentitySwitch, PersonIdentity
 
 
@@ -59,12 +58,6 @@ class IdentityExample:
     control_prompt: str
 
 
-def _encode_with_grad(models: DiffusionModels, texts: list[str]) -> Tensor:
-    tokens = models.tokenizer(texts, padding="max_length", max_length=models.tokenizer.model_max_length,
-                              truncation=True, return_tensors="pt").input_ids.to(models.device)
-    return models.text_encoder(tokens)[0].to(models.dtype)
-
-
 def identity_loss(models: DiffusionModels, examples: list[IdentityExample], timesteps: Tensor, noise: Tensor,
                   config: IdentityConfig) -> Tensor:
     """The weighted noise-prediction MSE of one batch at ``timesteps [B]`` with ``noise [B, C, h, w]``
@@ -73,13 +66,12 @@ def identity_loss(models: DiffusionModels, examples: list[IdentityExample], time
     skeletons = torch.stack([e.skeleton for e in examples]).to(models.device, models.dtype)
     with torch.no_grad():
         latents = encode_images(models, images)
-        alpha_bar = models.alphas_cumprod[timesteps].to(latents.dtype)[:, None, None, None]
-        noisy = alpha_bar.sqrt() * latents + (1.0 - alpha_bar).sqrt() * noise
+        noisy = add_noise(models, latents, noise, timesteps)
         control_text = encode_text(models, [e.control_prompt for e in examples])
         down, middle = models.controlnet(noisy, timesteps, encoder_hidden_states=control_text,
                                          controlnet_cond=skeletons, conditioning_scale=config.controlnet_scale,
                                          return_dict=False)
-    text = _encode_with_grad(models, [e.prompt for e in examples])
+    text = text_states(models, [e.prompt for e in examples])
     predicted = models.unet(noisy, timesteps, encoder_hidden_states=text, down_block_additional_residuals=down,
                             mid_block_additional_residual=middle, return_dict=False)[0]
     masks = torch.stack([e.mask for e in examples]).to(models.device)[:, None].float()
