@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
+from glimpse.losses import HARD_SURFACE_OFFSET
 from glimpse.crops.skeleton import OPENPOSE18_COLOURS
 from glimpse.prior.orbit import orbit_camera
 from glimpse.prior.sds.cameras import PART_JOINTS, SDSCameraConfig, fovy_deg, sample_view, view_kind, zoomed_camera
@@ -258,8 +261,60 @@ def test_missing_or_wrong_weights_are_refused_with_the_parameter_to_set(tmp_path
         check_weight_paths(replace(DIFFUSION, sd_path=str(tmp_path / "sd"), controlnet_path=str(tmp_path / "cn")))
     checkpoint = tmp_path / "v1-5-pruned.safetensors"
     checkpoint.write_bytes(b"0")
-    with pytest.raises(ConfigError, match="single-file checkpoint"):
+    with pytest.raises(ConfigError, match=r"single-file checkpoint.*set diffusion\.sd_config_path"):
         check_weight_paths(replace(DIFFUSION, sd_path=str(checkpoint), controlnet_path=str(tmp_path / "cn")))
+    with pytest.raises(ConfigError, match=r"diffusion\.sd_config_path: .* lacks unet/, vae/"):
+        check_weight_paths(replace(DIFFUSION, sd_path=str(checkpoint), sd_config_path=str(tmp_path / "cn"),
+                                   controlnet_path=str(tmp_path / "cn")))
+
+
+def test_the_test_checkpoints_are_in_the_original_layouts_diffusers_converts():
+    from diffusers.loaders.single_file_utils import (convert_controlnet_checkpoint, convert_ldm_unet_checkpoint,
+                                                     convert_ldm_vae_checkpoint)
+    from tests.original_checkpoints import original_controlnet_state, original_state
+
+    unet, controlnet, vae, text_encoder, _, _ = tiny_models(Path(tempfile.mkdtemp()))
+    state = original_state(unet, vae, text_encoder)
+    for model, converted in ((unet, convert_ldm_unet_checkpoint(state, unet.config)),
+                             (vae, convert_ldm_vae_checkpoint(state, vae.config)),
+                             (controlnet, convert_controlnet_checkpoint(original_controlnet_state(controlnet),
+                                                                        controlnet.config))):
+        expected = model.state_dict()
+        assert set(converted) == set(expected)
+        assert all(torch.equal(converted[name], value) for name, value in expected.items())
+
+
+def test_single_file_checkpoints_load_with_local_configs(tmp_path):
+    from tests.original_checkpoints import write_original_checkpoints
+
+    files = write_original_checkpoints(tmp_path)
+    config = replace(DIFFUSION, sd_path=str(files["sd"]), sd_config_path=str(files["sd_configs"]),
+                     controlnet_path=str(files["controlnet"]),
+                     controlnet_config_path=str(files["controlnet_configs"]), allow_cpu=True)
+    loaded = load_diffusion(config, torch.device("cpu"))
+    unet, controlnet, vae, text_encoder, tokenizer, _ = tiny_models(tmp_path / "again")  # the same weights
+    for name, model in (("unet", unet), ("controlnet", controlnet), ("vae", vae), ("text_encoder", text_encoder)):
+        for key, value in model.state_dict().items():
+            assert torch.equal(getattr(loaded, name).state_dict()[key], value), (name, key)
+    assert loaded.tokenizer("a person").input_ids == tokenizer("a person").input_ids
+    assert loaded.train_timesteps == 1000
+
+
+def test_a_single_file_that_does_not_fit_its_configs_is_refused_naming_both(tmp_path):
+    from safetensors.torch import load_file, save_file
+    from tests.original_checkpoints import write_original_checkpoints
+
+    files = write_original_checkpoints(tmp_path)
+    state = load_file(str(files["sd"]))
+    dropped = next(name for name in state if name.startswith("model.diffusion_model.output_blocks"))
+    del state[dropped]
+    save_file(state, str(files["sd"]))
+    config = replace(DIFFUSION, sd_path=str(files["sd"]), sd_config_path=str(files["sd_configs"]),
+                     controlnet_path=str(files["controlnet"]),
+                     controlnet_config_path=str(files["controlnet_configs"]), allow_cpu=True)
+    with pytest.raises(GlimpseError, match=r"tiny-sd15\.safetensors: its UNet does not fit the configs in "
+                                           r".*sd_configs: weights 1 missing \(e\.g\. up_blocks"):
+        load_diffusion(config, torch.device("cpu"))
 
 
 def test_without_cuda_sds_stops_unless_the_cpu_is_allowed():
@@ -315,6 +370,20 @@ def test_an_sds_step_reaches_only_the_guided_persons_gaussians(tmp_path):
     assert other.sh_dc.grad is None and other.means.grad is None
     again = prior.person_loss(prior.start, 0)
     assert again.item() == pytest.approx(loss.item(), rel=1e-5)  # (seed, iteration, person) fix every draw
+
+
+def test_the_hard_surface_term_of_an_sds_render_is_weighted_by_lambda_recon(tmp_path):
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    prior, people = _sds_prior(tmp_path, body_model)
+    step = prior.start + 5
+    sds, surface = prior.person_terms(step, 1)
+    weight = DIFFUSION.hard_surface * recon_weight(5, prior.timesteps, DIFFUSION.recon_scale)
+    assert DIFFUSION.hard_surface > 0 and weight > 1e4  # the official code's 0.1 x lambda_rgb
+    assert prior.person_loss(step, 1).item() == pytest.approx(sds.item() + weight * surface.item(), rel=1e-5)
+    assert 0.0 < surface.item() <= HARD_SURFACE_OFFSET  # alphas between 0 and 1, not all of them 0 or 1
+    surface.backward()
+    guided, other = people[1].model, people[0].model
+    assert guided.opacity_logits.grad.abs().sum() > 0 and other.opacity_logits.grad is None
 
 
 def test_summed_sds_is_one_term_of_the_iterations_loss(tmp_path):

@@ -17,6 +17,8 @@ Combine = Literal["separate_steps", "summed"]
 class DiffusionConfig:
     sd_path: str | None
     controlnet_path: str | None
+    sd_config_path: str | None
+    controlnet_config_path: str | None
     allow_cpu: bool
     half_precision: bool
     start_at: int
@@ -26,6 +28,7 @@ class DiffusionConfig:
     early_resolution_px: int
     early_resolution_steps: int
     recon_scale: float
+    hard_surface: float
     combine: Combine
     skeleton_line_px: float
     prompt: PromptConfig

@@ -1,11 +1,12 @@
-"""Loading the diffusion prior's weights from the local folders pipeline.yaml names, never from a hub.
+"""Loading the diffusion prior's weights from the local paths pipeline.yaml names, never from a hub.
 
 ``diffusion.sd_path`` is a diffusers-format Stable Diffusion 1.5 folder (unet/, vae/, text_encoder/,
 tokenizer/, scheduler/, as ``save_pretrained`` or a hub snapshot writes it); ``diffusion.controlnet_path``
-a diffusers-format ControlNet folder (config.json and its weights). The hub is switched off for the
-whole load (HF_HUB_OFFLINE, local_files_only), so a missing file is an error naming it instead of a
-download. A single-file checkpoint (.safetensors / .ckpt) needs the hub's configs to be read: convert it
-to a diffusers folder first (docs/diffusion.md says how).
+a diffusers-format ControlNet folder (config.json and its weights). Either may instead be a single-file
+checkpoint (.safetensors / .ckpt / .pth, the original layouts) when the configs it lacks are given as local
+folders: ``diffusion.sd_config_path`` and ``diffusion.controlnet_config_path`` (single_file.py). The hub is
+switched off for the whole load (HF_HUB_OFFLINE, local_files_only), so a missing file is an error naming
+it instead of a download.
 
 SDS at SD 1.5's size needs CUDA: on a machine without it loading stops with a message, unless
 ``diffusion.allow_cpu`` (how the tests run tiny models). On CUDA the weights are fp16 when
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import os
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -23,36 +25,80 @@ import torch
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.prior.sds.guidance import DiffusionModels
+from glimpse.prior.sds.single_file import controlnet_from_file, stable_diffusion_from_file
 
 SD_SUBFOLDERS = ("unet", "vae", "text_encoder", "tokenizer", "scheduler")
-SINGLE_FILE_SUFFIXES = (".safetensors", ".ckpt", ".bin", ".pt")
+SINGLE_FILE_SUFFIXES = (".safetensors", ".ckpt", ".pth", ".pt", ".bin")
 OFFLINE_VARIABLES = ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "DIFFUSERS_OFFLINE")
 
 
-def check_weight_paths(config: DiffusionConfig) -> tuple[Path, Path]:
-    """The two weight folders, or a ConfigError saying which parameter to set and what it must hold."""
+@dataclass(frozen=True)
+class WeightSources:
+    """Where each part's weights are: a diffusers folder (``*_configs`` None) or a single file read against
+    the diffusers config folder ``*_configs``."""
+
+    sd: Path
+    sd_configs: Path | None
+    controlnet: Path
+    controlnet_configs: Path | None
+
+
+def _single_file(path: Path) -> bool:
+    return path.is_file() and path.suffix in SINGLE_FILE_SUFFIXES
+
+
+def _check_sd_folder(name: str, folder: Path) -> None:
+    absent = [sub for sub in SD_SUBFOLDERS if not (folder / sub).is_dir()]
+    if absent:
+        raise ConfigError(f"{name}: {folder} lacks {', '.join(s + '/' for s in absent)} (a diffusers-format "
+                          "Stable Diffusion folder has unet/, vae/, text_encoder/, tokenizer/ and scheduler/)")
+
+
+def _check_controlnet_folder(name: str, folder: Path) -> None:
+    if not (folder / "config.json").is_file():
+        raise ConfigError(f"{name}: {folder} has no config.json (a diffusers-format ControlNet folder)")
+
+
+def _configs_for(name: str, path: Path, config_name: str, given: str | None) -> Path:
+    """The config folder a single-file checkpoint at ``path`` is read against, or a ConfigError."""
+    if not given:
+        raise ConfigError(f"{name}: {path} is a single-file checkpoint; it holds weights only, so set "
+                          f"{config_name} to a local folder with its diffusers configs (nothing is downloaded; "
+                          "docs/diffusion.md says which files), or give a diffusers-format folder instead")
+    folder = Path(str(given)).expanduser()
+    if not folder.is_dir():
+        raise ConfigError(f"{config_name}: {folder} is not a folder")
+    return folder
+
+
+def check_weight_paths(config: DiffusionConfig) -> WeightSources:
+    """Where the weights are, or a ConfigError saying which parameter to set and what it must hold."""
     given = {"diffusion.sd_path": config.sd_path, "diffusion.controlnet_path": config.controlnet_path}
     missing = [name for name, value in given.items() if not value]
     if missing:
         raise ConfigError(
             f"prior.kind sds needs the diffusion weights: set {' and '.join(missing)} in pipeline.yaml or with "
-            "PARAMS (local diffusers-format folders: Stable Diffusion 1.5 and an OpenPose ControlNet for it; "
-            "nothing is downloaded; docs/diffusion.md says where to get them)")
+            "PARAMS (local diffusers-format folders, or single-file checkpoints with their configs: Stable "
+            "Diffusion 1.5 and an OpenPose ControlNet for it; nothing is downloaded; docs/diffusion.md says "
+            "where to get them)")
     sd, controlnet = Path(str(config.sd_path)).expanduser(), Path(str(config.controlnet_path)).expanduser()
     for name, path in (("diffusion.sd_path", sd), ("diffusion.controlnet_path", controlnet)):
-        if path.is_file() and path.suffix in SINGLE_FILE_SUFFIXES:
-            raise ConfigError(f"{name}: {path} is a single-file checkpoint; give a diffusers-format folder "
-                              "(convert it once with diffusers' conversion script, docs/diffusion.md)")
-        if not path.is_dir():
-            raise ConfigError(f"{name}: {path} is not a folder")
-    absent = [sub for sub in SD_SUBFOLDERS if not (sd / sub).is_dir()]
-    if absent:
-        raise ConfigError(f"diffusion.sd_path: {sd} lacks {', '.join(s + '/' for s in absent)} (a diffusers-format "
-                          "Stable Diffusion folder has unet/, vae/, text_encoder/, tokenizer/ and scheduler/)")
-    if not (controlnet / "config.json").is_file():
-        raise ConfigError(f"diffusion.controlnet_path: {controlnet} has no config.json (a diffusers-format "
-                          "ControlNet folder)")
-    return sd, controlnet
+        if not (path.is_dir() or _single_file(path)):
+            raise ConfigError(f"{name}: {path} is neither a folder nor a single-file checkpoint "
+                              f"({', '.join(SINGLE_FILE_SUFFIXES)})")
+    sd_configs = controlnet_configs = None
+    if _single_file(sd):
+        sd_configs = _configs_for("diffusion.sd_path", sd, "diffusion.sd_config_path", config.sd_config_path)
+        _check_sd_folder("diffusion.sd_config_path", sd_configs)
+    else:
+        _check_sd_folder("diffusion.sd_path", sd)
+    if _single_file(controlnet):
+        controlnet_configs = _configs_for("diffusion.controlnet_path", controlnet, "diffusion.controlnet_config_path",
+                                          config.controlnet_config_path)
+        _check_controlnet_folder("diffusion.controlnet_config_path", controlnet_configs)
+    else:
+        _check_controlnet_folder("diffusion.controlnet_path", controlnet)
+    return WeightSources(sd, sd_configs, controlnet, controlnet_configs)
 
 
 def diffusion_ready(config: DiffusionConfig, device: torch.device) -> bool:
@@ -88,24 +134,43 @@ def hub_offline():
 
 
 def load_diffusion(config: DiffusionConfig, device: torch.device) -> DiffusionModels:
-    """The shared SD + ControlNet parts from the configured folders, frozen, on ``device``."""
-    sd, controlnet_dir = check_weight_paths(config)
+    """The shared SD + ControlNet parts from the configured paths, frozen, on ``device``."""
+    sources = check_weight_paths(config)
     device, dtype = diffusion_device(config, device)
-    from diffusers import AutoencoderKL, ControlNetModel, DDPMScheduler, UNet2DConditionModel
-    from transformers import CLIPTextModel, CLIPTokenizer
-
     with hub_offline():
         try:
-            options = {"local_files_only": True, "torch_dtype": dtype}
-            plain = {**options, "low_cpu_mem_usage": False}  # (true needs the accelerate package)
-            unet = UNet2DConditionModel.from_pretrained(sd, subfolder="unet", **plain)
-            vae = AutoencoderKL.from_pretrained(sd, subfolder="vae", **plain)
-            text_encoder = CLIPTextModel.from_pretrained(sd, subfolder="text_encoder", **options)
-            tokenizer = CLIPTokenizer.from_pretrained(sd, subfolder="tokenizer", local_files_only=True)
-            scheduler = DDPMScheduler.from_pretrained(sd, subfolder="scheduler", local_files_only=True)
-            controlnet = ControlNetModel.from_pretrained(controlnet_dir, **plain)
+            if sources.sd_configs is None:
+                unet, vae, text_encoder, tokenizer, scheduler = _stable_diffusion_from_folder(sources.sd, dtype)
+            else:
+                unet, vae, text_encoder, tokenizer, scheduler = stable_diffusion_from_file(
+                    sources.sd, sources.sd_configs, dtype)
+            if sources.controlnet_configs is None:
+                controlnet = _controlnet_from_folder(sources.controlnet, dtype)
+            else:
+                controlnet = controlnet_from_file(sources.controlnet, sources.controlnet_configs, dtype)
         except (OSError, ValueError) as error:
-            raise GlimpseError(f"diffusion weights could not be read from {sd} and {controlnet_dir}: {error}") from error
+            raise GlimpseError(f"diffusion weights could not be read from {sources.sd} and {sources.controlnet}: "
+                               f"{error}") from error
     for module in (unet, vae, text_encoder, controlnet):
         module.to(device).eval().requires_grad_(False)
     return DiffusionModels(unet, controlnet, vae, text_encoder, tokenizer, scheduler, device)
+
+
+def _stable_diffusion_from_folder(folder: Path, dtype: torch.dtype) -> tuple:
+    """(unet, vae, text_encoder, tokenizer, scheduler) from a diffusers-format folder."""
+    from diffusers import AutoencoderKL, DDPMScheduler, UNet2DConditionModel
+    from transformers import CLIPTextModel, CLIPTokenizer
+
+    options = {"local_files_only": True, "torch_dtype": dtype}
+    plain = {**options, "low_cpu_mem_usage": False}  # (true needs the accelerate package)
+    return (UNet2DConditionModel.from_pretrained(folder, subfolder="unet", **plain),
+            AutoencoderKL.from_pretrained(folder, subfolder="vae", **plain),
+            CLIPTextModel.from_pretrained(folder, subfolder="text_encoder", **options),
+            CLIPTokenizer.from_pretrained(folder, subfolder="tokenizer", local_files_only=True),
+            DDPMScheduler.from_pretrained(folder, subfolder="scheduler", local_files_only=True))
+
+
+def _controlnet_from_folder(folder: Path, dtype: torch.dtype):
+    from diffusers import ControlNetModel
+
+    return ControlNetModel.from_pretrained(folder, local_files_only=True, torch_dtype=dtype, low_cpu_mem_usage=False)

@@ -11,7 +11,9 @@ appeared in the scene"), whether or not the iteration's view shows them:
    Gaussians), an SDS camera around it (cameras.sample_view), the person's Gaussians rendered alone
    over a random colour at ``early_resolution_px`` for their first steps, then ``resolution_px``;
 3. the skeleton of that body from that camera, the view's prompts with the person's token, their
-   attention processors swapped into the shared UNet, a timestep from the schedule, the SDS loss.
+   attention processors swapped into the shared UNet, a timestep from the schedule, the SDS loss;
+4. plus the hard-surface term of that render's alpha, weighted ``hard_surface`` x lambda_recon (official
+   code: lambda_density_reg x lambda_rgb), which pushes the person's coverage towards 0 or 1 in every view.
 
 ``combine: summed`` returns the people's SDS losses as one term of the iteration's loss;
 ``separate_steps`` (official code) hands them to the trainer one person at a time
@@ -37,6 +39,7 @@ from glimpse.crops.skeleton import HEAD_JOINT
 from glimpse.crops.view import view_word
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians, joint_transforms
+from glimpse.losses import hard_surface_loss
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
 from glimpse.prior.sds.config import DiffusionConfig
@@ -106,8 +109,14 @@ class SDSPrior(UnseenPrior):
     # --- one person's SDS step -----------------------------------------------------------------------
 
     def person_loss(self, step: int, index: int) -> Tensor:
-        """The SDS loss of person ``index`` at joint iteration ``step`` (>= start_at), differentiable in their
-        Gaussians."""
+        """Person ``index``'s loss in their SDS step at joint iteration ``step`` (>= start_at): the SDS loss plus
+        ``hard_surface`` x lambda_recon x the hard-surface term of the same render (official code)."""
+        sds, surface = self.person_terms(step, index)
+        return sds + self.config.hard_surface * self.recon_weight(step) * surface
+
+    def person_terms(self, step: int, index: int) -> tuple[Tensor, Tensor]:
+        """(SDS loss, hard-surface term of the render's alpha) of person ``index`` at joint iteration ``step``,
+        unweighted, differentiable in their Gaussians."""
         person, config = self.people[index], self.config
         sds_step = step - self.start
         stream = (self.seed * STEP_SEED_STRIDE + step) * STEP_SEED_STRIDE + index
@@ -127,17 +136,17 @@ class SDSPrior(UnseenPrior):
         camera = render_camera(view.camera, size, size, self.device)
         posed = person.posed_with(transforms, camera.centre, self.render.sh_degree)
         background = torch.as_tensor(rng.random(3), dtype=torch.float32, device=self.device)
-        rgb = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
-                        colors=posed.colors, background=background, backend=self.render.backend,
-                        antialiased=self.render.antialiased).rgb
+        render = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
+                           colors=posed.colors, background=background, backend=self.render.backend,
+                           antialiased=self.render.antialiased)
         skeleton = self._skeleton(vertices, joints, view.camera, size)
         prompt_view = view_word(view.azimuth_deg, config.prompt.front_max_deg, config.prompt.back_min_deg)
         timestep = sample_timestep(sds_step, self.timesteps, self.models.train_timesteps, generator)
         self.switch.use(self.identities[person.pid])
-        loss, _ = sds_loss(self.models, rgb.permute(2, 0, 1)[None], skeleton, self._text(person.pid, prompt_view, kind),
-                           timestep, generator, SDSConfig(config.guidance_scale, config.controlnet_scale,
-                                                          config.resolution_px))
-        return loss
+        loss, _ = sds_loss(self.models, render.rgb.permute(2, 0, 1)[None], skeleton,
+                           self._text(person.pid, prompt_view, kind), timestep, generator,
+                           SDSConfig(config.guidance_scale, config.controlnet_scale, config.resolution_px))
+        return loss, hard_surface_loss(render.alpha)
 
     def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera, size: int) -> Tensor:
         """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera`` (``size``)."""
