@@ -27,7 +27,8 @@ from glimpse.prior.orbit import orbit_camera
 from glimpse.prior.sds.cameras import PART_JOINTS, SDSCameraConfig, fovy_deg, sample_view, view_kind, zoomed_camera
 from glimpse.prior.sds.control import skeleton_image
 from glimpse.prior.sds.config import DiffusionConfig
-from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, SDSText, encode_images, encode_text, sds_loss
+from glimpse.prior.sds.guidance import (DiffusionModels, SDSConfig, SDSText, add_noise, denoised_latents,
+                                        encode_images, encode_text, sds_loss)
 from glimpse.prior.sds.load import check_weight_paths, diffusion_device, load_diffusion
 from glimpse.prior.sds.prompts import PromptConfig, view_prompts
 from glimpse.prior.sds.schedule import TimestepConfig, recon_weight, sample_timestep, timestep_range
@@ -202,6 +203,19 @@ def test_the_gradient_in_the_latents_is_the_weighted_guided_noise_residual(model
     assert torch.isfinite(rgb_leaf.grad).all() and rgb_leaf.grad.abs().sum() > 0
 
 
+def test_the_denoised_guess_inverts_the_forward_diffusion(models, text):
+    latents = encode_images(models, torch.rand(1, 3, RENDER_PX, RENDER_PX, generator=torch.Generator().manual_seed(4)))
+    noise = torch.randn(latents.shape, generator=torch.Generator().manual_seed(5))
+    for timestep in (20, 500, 980):  # given the true noise, the guess is the clean latents
+        noisy = add_noise(models, latents, noise, timestep)
+        torch.testing.assert_close(denoised_latents(models, noisy, noise, timestep), latents, rtol=1e-4, atol=1e-4)
+    _, info = sds_loss(models, torch.rand(1, 3, RENDER_PX, RENDER_PX), torch.zeros(1, 3, RENDER_PX, RENDER_PX), text,
+                       500, torch.Generator().manual_seed(0), SDS, preview=True)
+    assert info.preview.shape == (1, 3, RENDER_PX, RENDER_PX) and 0 <= info.preview.min() <= info.preview.max() <= 1
+    assert sds_loss(models, torch.rand(1, 3, RENDER_PX, RENDER_PX), torch.zeros(1, 3, RENDER_PX, RENDER_PX), text,
+                    500, torch.Generator().manual_seed(0), SDS)[1].preview is None  # no decoding unless asked
+
+
 def test_a_nan_prediction_gives_a_zero_gradient(models, text, monkeypatch):
     import glimpse.prior.sds.guidance as guidance
 
@@ -210,7 +224,7 @@ def test_a_nan_prediction_gives_a_zero_gradient(models, text, monkeypatch):
     loss, info = sds_loss(models, rgb, torch.zeros(1, 3, RENDER_PX, RENDER_PX), text, 500,
                           torch.Generator().manual_seed(0), SDS)
     loss.backward()
-    assert loss.item() == 0.0 and info["sds_grad_norm"] == 0.0 and (rgb.grad == 0).all()
+    assert loss.item() == 0.0 and info.grad_norm == 0.0 and (rgb.grad == 0).all()
 
 
 def _gaussians(seed: int, offset: float) -> GaussianModel:
@@ -327,7 +341,7 @@ def test_without_cuda_sds_stops_unless_the_cpu_is_allowed():
 
 # --- the prior in stage 06 ----------------------------------------------------------------------------------
 
-def _sds_prior(tmp_path, body_model, combine: str = "separate_steps"):
+def _sds_prior(tmp_path, body_model, combine: str = "separate_steps", preview_dir=None, **changes):
     from glimpse.body.params import BodyParams
     from glimpse.humans.person import initial_person
     from glimpse.humans.visibility import BodyVisibility
@@ -337,7 +351,7 @@ def _sds_prior(tmp_path, body_model, combine: str = "separate_steps"):
 
     sd, controlnet = write_tiny_weights(tmp_path / "weights")
     config = replace(DIFFUSION, sd_path=str(sd), controlnet_path=str(controlnet), allow_cpu=True, start_at=10,
-                     resolution_px=RENDER_PX, early_resolution_px=RENDER_PX, combine=combine)
+                     resolution_px=RENDER_PX, early_resolution_px=RENDER_PX, combine=combine, **changes)
     loaded = load_diffusion(config, torch.device("cpu"))
     people = []
     for k, pid in enumerate(("p0", "p1")):
@@ -351,7 +365,7 @@ def _sds_prior(tmp_path, body_model, combine: str = "separate_steps"):
                       tmp_path / "05" / pid / "identity" / "identity.safetensors")
     visibility = {p.pid: BodyVisibility.empty(body_model.num_vertices) for p in people}
     context = PriorContext(people, visibility, body_model, RenderConfig("auto", 1, False), 0, lambda i: i,
-                           tmp_path / "05")
+                           tmp_path / "05", preview_dir)
     return make_prior("sds", context, {"sds": config}), people
 
 
@@ -384,6 +398,22 @@ def test_the_hard_surface_term_of_an_sds_render_is_weighted_by_lambda_recon(tmp_
     surface.backward()
     guided, other = people[1].model, people[0].model
     assert guided.opacity_logits.grad.abs().sum() > 0 and other.opacity_logits.grad is None
+
+
+def test_previews_are_written_only_when_asked_and_on_their_steps(tmp_path):
+    from glimpse.io.images import read_rgb
+
+    body_model = BodyModel.from_file(resolve_model_path(BODY))
+    previews = tmp_path / "previews"
+    prior, _ = _sds_prior(tmp_path, body_model, preview_dir=previews, preview_every=2)
+    for step in range(prior.start, prior.start + 3):
+        prior.person_terms(step, 0)
+    written = sorted(path.relative_to(previews).as_posix() for path in previews.rglob("*.png"))
+    assert written == [f"p0/{prior.start:06d}.png", f"p0/{prior.start + 2:06d}.png"]
+    assert read_rgb(previews / written[0]).shape == (RENDER_PX, 3 * RENDER_PX, 3)  # render | skeleton | guess
+    quiet, _ = _sds_prior(tmp_path / "quiet", body_model, preview_dir=tmp_path / "none")  # preview_every 0
+    quiet.person_terms(quiet.start, 0)
+    assert not (tmp_path / "none").exists()
 
 
 def test_summed_sds_is_one_term_of_the_iterations_loss(tmp_path):

@@ -31,7 +31,7 @@ from glimpse.render.config import RenderConfig
 class PriorContext:
     """What a prior may use: every person being trained, each person's vertex visibility in the input
     frames (by pid), the body model, the render settings, the run's seed, the schedule's scaling
-    of an iteration count (JointConfig.scaled) and stage 05's outputs."""
+    of an iteration count (JointConfig.scaled), stage 05's outputs and a folder for previews."""
 
     people: list[PersonGaussians]
     visibility: dict[str, BodyVisibility]
@@ -40,6 +40,7 @@ class PriorContext:
     seed: int
     scaled: Callable[[int], int]
     identity_dir: Path | None = None  # stage 05's output folder (<pid>/identity/: the sds prior's identities)
+    preview_dir: Path | None = None  # where a prior may write images of its guidance (the sds prior's previews)
 
 
 class UnseenPrior(ABC):

@@ -13,6 +13,8 @@ Outputs (OUT/<scene>/06_joint_opt/, CONTRACTS.md):
   report.json                  glimpse-joint-report/1: prior used, losses, Gaussian counts, densification,
                                per-frame PSNR on the input views, iterations per second
   renders/joint.mp4            each input frame beside its render
+  sds_previews/<pid>/<iteration>.png  prior sds with diffusion.preview_every > 0: the SDS render, its skeleton
+                               and the decoded one-step denoised guess, side by side
 Checkpoints: OUT/<scene>/.work/06_joint_opt/checkpoint.pt; a killed run resumes from there.
 """
 

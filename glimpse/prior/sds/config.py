@@ -31,6 +31,7 @@ class DiffusionConfig:
     hard_surface: float
     combine: Combine
     skeleton_line_px: float
+    preview_every: int
     prompt: PromptConfig
     timesteps: TimestepConfig
     cameras: SDSCameraConfig

@@ -122,11 +122,33 @@ def predicted_noise(models: DiffusionModels, noisy: Tensor, timestep: int, skele
     return negative + config.guidance_scale * (conditional - negative)
 
 
+@dataclass
+class SDSInfo:
+    """What one SDS step saw: the norm of its latent gradient and, when asked, the one-step denoised guess
+    decoded to RGB ``preview [B, 3, S, S]`` in 0..1 (what the guidance pulls the render towards)."""
+
+    grad_norm: float
+    preview: Tensor | None = None
+
+
+def denoised_latents(models: DiffusionModels, noisy: Tensor, predicted: Tensor, timestep: int) -> Tensor:
+    """The one-step estimate of the clean latents, (noisy - sqrt(1 - alpha_bar_t) eps) / sqrt(alpha_bar_t)."""
+    alpha_bar = models.alphas_cumprod[timestep].to(noisy.dtype)
+    return (noisy - (1.0 - alpha_bar).sqrt() * predicted) / alpha_bar.sqrt()
+
+
+@torch.no_grad()
+def decode_latents(models: DiffusionModels, latents: Tensor) -> Tensor:
+    """[B, C, h, w] scaled latents -> [B, 3, S, S] RGB in 0..1 (the VAE's decoder)."""
+    images = models.vae.decode(latents / models.vae.config.scaling_factor, return_dict=False)[0]
+    return ((images.float() + 1.0) / 2.0).clamp(0.0, 1.0)
+
+
 def sds_loss(models: DiffusionModels, rgb: Tensor, skeleton: Tensor, text: SDSText, timestep: int,
-             generator: torch.Generator, config: SDSConfig) -> tuple[Tensor, dict[str, float]]:
+             generator: torch.Generator, config: SDSConfig, preview: bool = False) -> tuple[Tensor, SDSInfo]:
     """The SDS loss of renders ``rgb [B, 3, H, W]`` (0..1, differentiable) against the skeleton images
     ``skeleton [B, 3, S, S]`` (0..1, S = config.resolution_px) at integer ``timestep``; its gradient in the
-    latents is w(t) (eps_hat - eps). Returns (loss, {"sds_grad_norm": ...})."""
+    latents is w(t) (eps_hat - eps). ``preview`` also decodes the denoised guess (one VAE decode)."""
     size = config.resolution_px
     if rgb.shape[-2:] != (size, size):
         rgb = F.interpolate(rgb, size=(size, size), mode="bilinear", align_corners=False)
@@ -138,5 +160,6 @@ def sds_loss(models: DiffusionModels, rgb: Tensor, skeleton: Tensor, text: SDSTe
         guided = predicted_noise(models, noisy, timestep, skeleton, text, config)
         grad = torch.nan_to_num((1.0 - alpha_bar) * (guided - noise), nan=0.0, posinf=0.0, neginf=0.0)
         target = latents - grad
+        guess = decode_latents(models, denoised_latents(models, noisy, guided, timestep)) if preview else None
     loss = 0.5 * (latents.float() - target.float()).square().sum() / latents.shape[0]
-    return loss, {"sds_grad_norm": float(grad.float().norm())}
+    return loss, SDSInfo(float(grad.float().norm()), guess)

@@ -18,7 +18,7 @@ import torch
 
 from glimpse.crops.view import person_token
 from glimpse.io.images import read_rgb, write_png
-from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, encode_view_text, predicted_noise
+from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, decode_latents, encode_view_text, predicted_noise
 from glimpse.prior.sds.identity import IDENTITY_FORMAT, IdentitySwitch, PersonIdentity, new_identity, save_identity
 from glimpse.prior.sds.prompts import without_token
 from glimpse.prior.sds.train_identity import IdentityConfig, IdentityExample, SampleConfig, train_identity
@@ -90,8 +90,8 @@ def sample_grid(models: DiffusionModels, identity: PersonIdentity, examples: lis
             for timestep in scheduler.timesteps:
                 noise = predicted_noise(models, latents, int(timestep), skeleton, text, guidance)
                 latents = scheduler.step(noise, timestep, latents).prev_sample
-            image = models.vae.decode(latents / models.vae.config.scaling_factor, return_dict=False)[0]
-            tiles.append(((image[0].float().clamp(-1, 1) + 1) * 0.5 * COLOUR_LEVELS).round().byte().permute(1, 2, 0))
+            image = decode_latents(models, latents)[0]
+            tiles.append((image * COLOUR_LEVELS).round().byte().permute(1, 2, 0))
     finally:
         switch.use(None)
     return torch.cat(tiles, dim=1).cpu().numpy()

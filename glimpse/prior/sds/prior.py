@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from glimpse.background.stage import render_camera
@@ -39,6 +40,7 @@ from glimpse.crops.skeleton import HEAD_JOINT
 from glimpse.crops.view import view_word
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians, joint_transforms
+from glimpse.io.images import write_png
 from glimpse.losses import hard_surface_loss
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
@@ -47,7 +49,7 @@ from glimpse.prior.sds.control import skeleton_image
 from glimpse.prior.sds.guidance import SDSConfig, SDSText, encode_view_text, sds_loss
 from glimpse.prior.sds.identity import IdentitySwitch, load_identity
 from glimpse.prior.sds.load import load_diffusion
-from glimpse.prior.sds.person_identity import IDENTITY_FILE, unit_image
+from glimpse.prior.sds.person_identity import COLOUR_LEVELS, IDENTITY_FILE, unit_image
 from glimpse.prior.sds.prompts import view_prompts
 from glimpse.prior.sds.schedule import recon_weight, sample_timestep
 from glimpse.render import rasterize
@@ -81,6 +83,8 @@ class SDSPrior(UnseenPrior):
         self.timesteps = replace(config.timesteps, hold_steps=scaled(config.timesteps.hold_steps),
                                  anneal_steps=scaled(config.timesteps.anneal_steps))
         self.cameras = replace(config.cameras, zoom_after=scaled(config.cameras.zoom_after))
+        self.preview_every = scaled(config.preview_every) if config.preview_every > 0 else 0
+        self.preview_dir = context.preview_dir
         self.models = load_diffusion(config, self.device)
         self.identities = {}
         for person in self.people:
@@ -143,10 +147,24 @@ class SDSPrior(UnseenPrior):
         prompt_view = view_word(view.azimuth_deg, config.prompt.front_max_deg, config.prompt.back_min_deg)
         timestep = sample_timestep(sds_step, self.timesteps, self.models.train_timesteps, generator)
         self.switch.use(self.identities[person.pid])
-        loss, _ = sds_loss(self.models, render.rgb.permute(2, 0, 1)[None], skeleton,
-                           self._text(person.pid, prompt_view, kind), timestep, generator,
-                           SDSConfig(config.guidance_scale, config.controlnet_scale, config.resolution_px))
+        rgb = render.rgb.permute(2, 0, 1)[None]
+        preview = self.preview_dir is not None and self.preview_every > 0 and sds_step % self.preview_every == 0
+        loss, info = sds_loss(self.models, rgb, skeleton, self._text(person.pid, prompt_view, kind), timestep,
+                              generator, SDSConfig(config.guidance_scale, config.controlnet_scale,
+                                                   config.resolution_px), preview)
+        if info.preview is not None:
+            self._write_preview(self.preview_dir / person.pid / f"{step:06d}.png", rgb, skeleton, info.preview)
         return loss, hard_surface_loss(render.alpha)
+
+    @staticmethod
+    @torch.no_grad()
+    def _write_preview(path, rgb: Tensor, skeleton: Tensor, guess: Tensor) -> None:
+        """render | skeleton | denoised guess side by side, each [1, 3, *, *] in 0..1, at the guess's size."""
+        size = guess.shape[-2:]
+        tiles = [F.interpolate(rgb.detach().float(), size=size, mode="bilinear", align_corners=False),
+                 F.interpolate(skeleton.float(), size=size, mode="nearest"), guess.float()]
+        strip = torch.cat(tiles, dim=-1)[0].clamp(0.0, 1.0).permute(1, 2, 0)
+        write_png(path, (strip * COLOUR_LEVELS).round().byte().cpu().numpy())
 
     def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera, size: int) -> Tensor:
         """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera`` (``size``)."""
