@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -158,7 +159,7 @@ class SDSPrior(UnseenPrior):
 
     @staticmethod
     @torch.no_grad()
-    def _write_preview(path, rgb: Tensor, skeleton: Tensor, guess: Tensor) -> None:
+    def _write_preview(path: Path, rgb: Tensor, skeleton: Tensor, guess: Tensor) -> None:
         """render | skeleton | denoised guess side by side, each [1, 3, *, *] in 0..1, at the guess's size."""
         size = guess.shape[-2:]
         tiles = [F.interpolate(rgb.detach().float(), size=size, mode="bilinear", align_corners=False),
