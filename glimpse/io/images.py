@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 from PIL import Image, UnidentifiedImageError
 
 __all__ = [
@@ -132,6 +133,11 @@ def read_mask(path: str | Path) -> np.ndarray:
     if image.mode != "L":
         image = image.convert("L")
     return np.asarray(image, dtype=np.uint8) >= 128
+
+
+def rgb_to_uint8(rgb: torch.Tensor) -> np.ndarray:
+    """[H, W, 3] float colours in [0, 1] (clamped) -> [H, W, 3] uint8, rounded."""
+    return (rgb.detach().clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
 def write_png(path: str | Path, array: np.ndarray) -> None:

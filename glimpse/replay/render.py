@@ -13,6 +13,7 @@ from glimpse.background.stage import render_camera
 from glimpse.body.params import BodyParams
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians
+from glimpse.io.images import rgb_to_uint8
 from glimpse.joint.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.replay.cameras import Shot
 from glimpse.replay.finished import FinishedRun
@@ -86,11 +87,6 @@ def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) ->
     return FrameGaussians(*(torch.cat([getattr(first, name), getattr(second, name)])
                             for name in ("means", "covariances", "opacities", "colors")),
                           torch.cat([first.groups, groups]), rows)
-
-
-def rgb_to_uint8(rgb: torch.Tensor) -> np.ndarray:
-    """[H, W, 3] float colours in [0, 1] (clamped) -> [H, W, 3] uint8, rounded."""
-    return (rgb.clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
 @torch.no_grad()

@@ -29,13 +29,13 @@ from glimpse.body.motion import BodySequence
 from glimpse.body.params import BodyParams
 from glimpse.eval.config import SpeedConfig
 from glimpse.humans.person import PersonGaussians
+from glimpse.io.images import rgb_to_uint8
 from glimpse.joint.compose import frame_gaussians, render_frame
 from glimpse.prior.orbit import turn_cameras
 from glimpse.render import rasterize
 from glimpse.render.rasterize import choose_backend
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, upright
-from glimpse.replay.render import rgb_to_uint8
 
 SPEED_FORMAT = "glimpse-speed/1"
 MB = 2.0**20

@@ -22,7 +22,7 @@ from glimpse.background.stage import render_camera
 from glimpse.eval.config import RenderSetConfig
 from glimpse.errors import GlimpseError
 from glimpse.eval.views import ScoredView
-from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
+from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, rgb_to_uint8
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.video import write_mp4
 from glimpse.prior.orbit import box_centre, turn_cameras
@@ -30,7 +30,7 @@ from glimpse.render import rasterize
 from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
-from glimpse.replay.render import Edits, people_centre, render_shot, render_video, rgb_to_uint8
+from glimpse.replay.render import Edits, people_centre, render_shot, render_video
 
 
 NEVER_SEEN_TINT = (255, 0, 255)  # magenta: the background no input frame showed, in removed_<pid>.mp4

@@ -29,7 +29,7 @@ from glimpse.crops.stage import CROPS_FORMAT, CropsInputs, identity_plan, person
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.prior.sds.load import (  # noqa: E402
-    check_weight_paths, diffusion_device, diffusion_ready, load_diffusion,
+    check_sds_can_run, diffusion_ready, load_diffusion,
 )
 from glimpse.prior.sds.person_identity import identity_formats, train_identities  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
@@ -44,8 +44,7 @@ def run(ctx: StageContext) -> None:
     plan = identity_plan(ctx.section("prior").kind, diffusion_ready(diffusion, device))
     apply_compute(compute)
     if plan.identity == "trained":  # before any work: missing weights or no CUDA stop the stage here
-        check_weight_paths(diffusion)
-        diffusion_device(diffusion, device)
+        check_sds_can_run(diffusion, device)
     scene = load_scene(ctx.scene_root)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")

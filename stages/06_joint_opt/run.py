@@ -39,7 +39,7 @@ from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
 from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.prior import check_prior_kind  # noqa: E402
-from glimpse.prior.sds.load import check_weight_paths, diffusion_device, diffusion_ready  # noqa: E402
+from glimpse.prior.sds.load import check_sds_can_run, diffusion_ready  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "06_joint_opt"
@@ -51,8 +51,7 @@ def run(ctx: StageContext) -> None:
     diffusion, device = ctx.section("diffusion"), resolve_device(compute)
     prior_kind = check_prior_kind(ctx.section("prior").kind, diffusion_ready(diffusion, device))
     if prior_kind == "sds":  # before any work: missing weights or no CUDA stop the stage here
-        check_weight_paths(diffusion)
-        diffusion_device(diffusion, device)
+        check_sds_can_run(diffusion, device)
     apply_compute(compute)
     scene = load_scene(ctx.scene_root)
     dirs = {name: ctx.upstream_dir(name) for name in UPSTREAM}

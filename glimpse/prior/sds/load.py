@@ -101,6 +101,13 @@ def check_weight_paths(config: DiffusionConfig) -> WeightSources:
     return WeightSources(sd, sd_configs, controlnet, controlnet_configs)
 
 
+def check_sds_can_run(config: DiffusionConfig, device: torch.device) -> None:
+    """Before any work (stages 05 and 06 with prior.kind sds): the weights are where pipeline.yaml says and SDS
+    may run on ``device``; else the ConfigError or GlimpseError saying what to set."""
+    check_weight_paths(config)
+    diffusion_device(config, device)
+
+
 def diffusion_ready(config: DiffusionConfig, device: torch.device) -> bool:
     """Whether ``prior.kind: auto`` picks sds: both weight paths set and a CUDA device (CONTRACTS.md)."""
     return bool(config.sd_path and config.controlnet_path) and device.type == "cuda"

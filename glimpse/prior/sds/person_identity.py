@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from glimpse.crops.view import person_token
-from glimpse.io.images import read_rgb, write_png
+from glimpse.io.images import read_rgb, rgb_to_uint8, write_png
 from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, decode_latents, encode_view_text, predicted_noise
 from glimpse.prior.sds.identity import IDENTITY_FORMAT, IdentitySwitch, PersonIdentity, new_identity, save_identity
 from glimpse.prior.sds.prompts import without_token
@@ -91,10 +91,10 @@ def sample_grid(models: DiffusionModels, identity: PersonIdentity, examples: lis
                 noise = predicted_noise(models, latents, int(timestep), skeleton, text, guidance)
                 latents = scheduler.step(noise, timestep, latents).prev_sample
             image = decode_latents(models, latents)[0]
-            tiles.append((image * COLOUR_LEVELS).round().byte().permute(1, 2, 0))
+            tiles.append(rgb_to_uint8(image.permute(1, 2, 0)))
     finally:
         switch.use(None)
-    return torch.cat(tiles, dim=1).cpu().numpy()
+    return np.concatenate(tiles, axis=1)
 
 
 def train_person_identity(models: DiffusionModels, pid: str, crops_dir: Path, doc: dict, references: list[Path],

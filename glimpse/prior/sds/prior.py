@@ -41,7 +41,7 @@ from glimpse.crops.skeleton import HEAD_JOINT
 from glimpse.crops.view import view_word
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians, joint_transforms
-from glimpse.io.images import write_png
+from glimpse.io.images import rgb_to_uint8, write_png
 from glimpse.losses import hard_surface_loss
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
@@ -50,7 +50,7 @@ from glimpse.prior.sds.control import skeleton_image
 from glimpse.prior.sds.guidance import SDSConfig, SDSText, encode_view_text, sds_loss
 from glimpse.prior.sds.identity import IdentitySwitch, load_identity
 from glimpse.prior.sds.load import load_diffusion
-from glimpse.prior.sds.person_identity import COLOUR_LEVELS, IDENTITY_FILE, unit_image
+from glimpse.prior.sds.person_identity import IDENTITY_FILE, unit_image
 from glimpse.prior.sds.prompts import view_prompts
 from glimpse.prior.sds.schedule import recon_weight, sample_timestep
 from glimpse.render import rasterize
@@ -164,8 +164,7 @@ class SDSPrior(UnseenPrior):
         size = guess.shape[-2:]
         tiles = [F.interpolate(rgb.detach().float(), size=size, mode="bilinear", align_corners=False),
                  F.interpolate(skeleton.float(), size=size, mode="nearest"), guess.float()]
-        strip = torch.cat(tiles, dim=-1)[0].clamp(0.0, 1.0).permute(1, 2, 0)
-        write_png(path, (strip * COLOUR_LEVELS).round().byte().cpu().numpy())
+        write_png(path, rgb_to_uint8(torch.cat(tiles, dim=-1)[0].permute(1, 2, 0)))
 
     def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera, size: int) -> Tensor:
         """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera`` (``size``)."""
