@@ -17,7 +17,6 @@ from glimpse.prior.surface import SurfacePrior
 
 PRIORS: dict[str, type[UnseenPrior]] = {NoPrior.name: NoPrior, SurfacePrior.name: SurfacePrior, SDSPrior.name: SDSPrior}
 AUTO_ORDER = ("sds", "surface", "none")
-PLANNED: dict[str, str] = {}
 
 
 def resolve_prior_kind(kind: str, diffusion_ready: bool = False) -> str:
@@ -33,9 +32,6 @@ def check_prior_kind(kind: str, diffusion_ready: bool = False) -> str:
     name = resolve_prior_kind(kind, diffusion_ready)
     if name in PRIORS:
         return name
-    if name in PLANNED:
-        raise ConfigError(f"pipeline.yaml prior.kind: {name!r} is not available yet (it arrives with {PLANNED[name]}); "
-                          f"registered priors: {', '.join(PRIORS)} (or auto)")
     raise ConfigError(f"pipeline.yaml prior.kind: unknown prior {name!r}; registered priors: "
                       f"{', '.join(PRIORS)} (or auto)")
 
