@@ -78,6 +78,7 @@ print-dag:
 	@$(PIPELINE) print-dag
 
 test: $(VENV)/.installed-test
+	$(VENV)/bin/lint-imports --no-cache
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 bench: venv

@@ -27,8 +27,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from glimpse.background.stage import render_camera  # noqa: E402
-from glimpse.background.truth import judge_background  # noqa: E402
+from glimpse.background.truth import judge_background, stage_render_settings  # noqa: E402
+from glimpse.cameras.model import render_camera  # noqa: E402
 from glimpse.fixtures.scenes import make_scene  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
@@ -51,7 +51,7 @@ def render_seconds(stage_dir: Path, sfm_dir: Path) -> float:
     times = []
     for _ in range(RENDER_REPEATS):
         started = time.perf_counter()
-        out = rasterize(camera, **model.render_inputs())
+        out = rasterize(camera, **model.render_inputs(), settings=stage_render_settings(stage_dir))
         out.rgb.sum().backward()
         times.append(time.perf_counter() - started)
         model.zero_grad()

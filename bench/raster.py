@@ -44,7 +44,7 @@ def measure(backend: str, count: int, size: int, backward: bool) -> dict:
     """Runs in the subprocess: median seconds per call and peak extra memory (MB)."""
     import torch
 
-    from glimpse.render import Camera, rasterize
+    from glimpse.render import Camera, RenderConfig, rasterize
     from glimpse.render.projection import fov_to_focal
 
     torch.manual_seed(0)
@@ -65,7 +65,7 @@ def measure(backend: str, count: int, size: int, backward: bool) -> dict:
     target = torch.rand(size, size, 3)
 
     def call() -> None:
-        out = rasterize(camera, backend=backend, **params)
+        out = rasterize(camera, **params, settings=RenderConfig(backend, sh_degree=0, antialiased=False))
         if backward:
             ((out.rgb - target) ** 2).mean().backward()
 

@@ -1,5 +1,5 @@
 """Novel-pose render speed (paper Table 5) and whole-scene speed, with stage 07's protocol
-(glimpse/replay/speed.py, pipeline.yaml 07_eval.speed), 2 threads, the default backend.
+(glimpse/eval/speed.py, pipeline.yaml 07_eval.speed), 2 threads, the default backend.
 
 The person: PERSON_GAUSSIANS Gaussians spread over the free body's canonical surface (area-weighted
 samples, kNN scales, random colours, SH degree 2 with random higher bands, opacity 0.9), skinned by
@@ -31,19 +31,25 @@ from glimpse.body.skinning import bake_skin_weight_grid  # noqa: E402
 from glimpse.cameras.model import PinholeCamera  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.eval.config import SpeedConfig  # noqa: E402
+from glimpse.eval.speed import (  # noqa: E402
+    SpeedTiming,
+    speed_markdown,
+    speed_report,
+    time_frames,
+    time_novel_pose,
+    time_scene,
+)
 from glimpse.gaussians.model import GaussianModel, knn_scales  # noqa: E402
 from glimpse.humans.person import PersonGaussians, build_rig  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
 from glimpse.replay.finished import FinishedRun, load_finished_run  # noqa: E402
 from glimpse.replay.motion import motion_from_spec  # noqa: E402
-from glimpse.replay.speed import (  # noqa: E402
-    SpeedTiming, speed_markdown, speed_report, time_frames, time_novel_pose, time_scene,
-)
 
 THREADS = 2
 SEED = 0
 PERSON_GAUSSIANS = 15_000  # the paper's Table 5 person
 SH_DEGREE = 2
+RENDER = RenderConfig("cpu", SH_DEGREE, antialiased=False)  # what the timings draw with
 OPACITY = 0.9
 KNN = 3  # neighbours of the initial scales (3DGS)
 SCALE_FLOOR_M = 1e-3
@@ -111,8 +117,8 @@ def wall_camera(width: int, height: int) -> PinholeCamera:
 
 def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) -> SpeedTiming:
     """The same Gaussians rasterized in canonical pose from the same circling camera, with no posing."""
-    from glimpse.background.stage import render_camera
-    from glimpse.prior.orbit import turn_cameras
+    from glimpse.cameras.model import render_camera
+    from glimpse.cameras.orbit import turn_cameras
     from glimpse.render import rasterize
 
     device = torch.device("cpu")
@@ -124,7 +130,7 @@ def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) 
                for pinhole in turn_cameras(np.tile(centre, (total, 1)), config.radius_m, config.fovy_deg, size)]
 
     def draw(k: int, camera) -> int:
-        rasterize(camera, **inputs, background=torch.ones(3))
+        rasterize(camera, **inputs, background=torch.ones(3), settings=RENDER)
         return len(person.model)
 
     def pose(k: int):
@@ -165,7 +171,7 @@ def main() -> None:
     for size in sizes:
         baseline = canonical_baseline(person, size, config)
         print(row("canonical, no posing (baseline)", baseline), flush=True)
-        timing = time_novel_pose(person, motion, size, config, SH_DEGREE, "cpu", device)
+        timing = time_novel_pose(person, motion, size, config, RENDER, device)
         print(row("person, novel pose", timing, baseline), flush=True)
     if not args.quick:
         print(f"\nwhole scene: {SCENE_PEOPLE} such people and {SCENE_BACKGROUND:,} background Gaussians, "
@@ -177,7 +183,7 @@ def main() -> None:
         background = room_background(SCENE_BACKGROUND, rng)
         for width, height in SCENE_SIZES:
             run = FinishedRun(Path("."), width, height, {0: wall_camera(width, height)}, background, people,
-                              body_model, RenderConfig("cpu", SH_DEGREE, False))
+                              body_model, RENDER)
             timing = time_scene(run, [0] * SCENE_FRAMES, config.warmup_frames, device)
             print(row("whole scene", timing), flush=True)
     if args.run:

@@ -12,12 +12,16 @@ from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.export.splats import (
-    concatenate, covariance_to_scales_quats, frame_splats, rotate_sh, with_sh_degree,
+    concatenate,
+    covariance_to_scales_quats,
+    frame_splats,
+    rotate_sh,
+    with_sh_degree,
 )
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.ply import read_gaussians_ply, write_gaussians_ply
+from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import initial_person
-from glimpse.joint.compose import frame_gaussians, render_frame
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
 from glimpse.render.projection import quat_scale_to_covariance
@@ -78,7 +82,7 @@ def test_a_posed_person_exported_as_3dgs_renders_like_the_run(tmp_path):
     splats, _ = read_gaussians_ply(tmp_path / "posed.ply")
     exported = GaussianModel.from_splats(splats)
     with torch.no_grad():
-        again = rasterize(camera, **exported.render_inputs(), background=torch.zeros(3), backend="cpu").rgb
+        again = rasterize(camera, **exported.render_inputs(), background=torch.zeros(3), settings=RENDER).rgb
     assert run.amax() > 0.3  # the person is in the picture
     assert (again - run).abs().max() < 1e-5  # 3.6e-7 measured (float32); 0.67 without rotating the SH
 

@@ -19,7 +19,7 @@ from glimpse.gaussians.density import (
 from glimpse.gaussians.model import GaussianModel, knn_scales
 from glimpse.gaussians.optim import LearningRates, exponential_lr, make_optimizer, set_position_lr
 from glimpse.gaussians.ply import read_gaussians_ply, write_gaussians_ply
-from glimpse.pipeline.checkpoint import fingerprint, load_checkpoint, save_checkpoint
+from glimpse.io.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.render.projection import quat_to_rotation
 
 RATES = LearningRates(1.6e-4, 1.6e-6, 100, 2.5e-3, 1.25e-4, 0.05, 5e-3, 1e-3)

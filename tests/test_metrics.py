@@ -1,4 +1,4 @@
-"""PSNR and SSIM (glimpse.metrics) against scikit-image, masks, gradients; the metrics table writer."""
+"""PSNR and SSIM (glimpse.metrics.image) against scikit-image, masks, gradients; the metrics table writer."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from glimpse.metrics import SSIM_RADIUS, SSIM_WIN_SIZE, gaussian_window_1d, psnr, ssim, ssim_map
-from glimpse.metrics_table import EvalProtocol, FrameMetrics, summarize, table_markdown, write_metrics_table
+from glimpse.metrics.image import SSIM_RADIUS, SSIM_WIN_SIZE, gaussian_window_1d, psnr, ssim, ssim_map
+from glimpse.metrics.table import EvalProtocol, FrameMetrics, summarize, table_markdown, write_metrics_table
 
 skimage_metrics = pytest.importorskip("skimage.metrics")
 SKIMAGE_SSIM = dict(gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1.0, channel_axis=-1)

@@ -16,8 +16,9 @@ from scipy.sparse import coo_matrix
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
-from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
+from glimpse.body.symmetry import mirror_vertex_map
 from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.orbit import orbit_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.eval.coverage import CoverageConfig, canonical_hole_share
 from glimpse.eval.never_seen import PosedBodies, flat_bodies
@@ -27,7 +28,6 @@ from glimpse.humans.visibility import BodyVisibility, VisibilityConfig, body_vis
 from glimpse.prior import PriorContext, make_prior
 from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
-from glimpse.prior.orbit import orbit_camera
 from glimpse.render.config import RenderConfig
 from glimpse.render.sh import rgb_to_sh_dc
 
@@ -234,10 +234,10 @@ def test_a_person_covering_their_body_has_no_holes_and_a_faded_half_shows_as_hol
     person = initial_person("p0", body_model, _standing(), 30.0, BODY.skinning, 0.5, 0.9, 3, 0)
     config = CoverageConfig(views=4, size_px=96)
     faces = body_model.faces.numpy()
-    covered = canonical_hole_share(person, faces, config, RENDER.backend, torch.device("cpu"))
+    covered = canonical_hole_share(person, faces, config, RENDER, torch.device("cpu"))
     with torch.no_grad():
         person.model.opacity_logits[person.model.means[:, 0] > 0.0] = -10.0  # the body's left half fades away
-    faded = canonical_hole_share(person, faces, config, RENDER.backend, torch.device("cpu"))
+    faded = canonical_hole_share(person, faces, config, RENDER, torch.device("cpu"))
     assert covered < 0.02
     # about half of the front and back views; from the sides the other half shows through (but not the arm)
     assert 0.15 < faded < 0.35

@@ -2,12 +2,11 @@
 against finite differences and closed forms, tile binning against no binning, and the
 pixel convention. gsplat (CUDA) is compared when a GPU is present."""
 
-import math
 
 import pytest
 import torch
 
-from glimpse.render import Camera, rasterize
+from glimpse.render import Camera, RenderConfig, rasterize
 from glimpse.render.binning import bin_gaussians
 from glimpse.render.composite_cpu import available as cpu_available
 from glimpse.render.composite_torch import composite_dense, composite_torch
@@ -18,6 +17,10 @@ needs_cpu_kernel = pytest.mark.skipif(not cpu_available(), reason="the C++ kerne
 needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
 IMAGE_ATOL = 1e-5
 GRAD_REL, GRAD_COS = 1e-4, 0.9999
+
+
+def settings(backend: str, antialiased: bool = False) -> RenderConfig:
+    return RenderConfig(backend=backend, sh_degree=3, antialiased=antialiased)
 
 
 def camera(width=64, height=48, focal=55.0, dtype=torch.float32) -> Camera:
@@ -47,14 +50,15 @@ def scene(kind: str, n: int = 400, seed: int = 0) -> dict:
     return params
 
 
-def render_with_grads(backend: str, params: dict, cam: Camera, covariance_input: bool = False, **kw):
+def render_with_grads(backend: str, params: dict, cam: Camera, covariance_input: bool = False,
+                      antialiased: bool = False):
     leaves = {k: v.clone().requires_grad_(True) for k, v in params.items()}
     geometry = ({"covariances": quat_scale_to_covariance(leaves["quats"], leaves["scales"])} if covariance_input
                 else {"quats": leaves["quats"], "scales": leaves["scales"]})
     groups = torch.arange(len(params["means"])) % 3
     out = rasterize(cam, means=leaves["means"], opacities=leaves["opacities"], colors=leaves["colors"],
-                    background=torch.tensor([0.1, 0.5, 0.9]), groups=groups, num_groups=3, backend=backend,
-                    **geometry, **kw)
+                    background=torch.tensor([0.1, 0.5, 0.9]), groups=groups, num_groups=3,
+                    settings=settings(backend, antialiased), **geometry)
     g = torch.Generator().manual_seed(7)  # the same random cotangents for both backends
     loss = ((out.rgb * torch.rand(out.rgb.shape, generator=g)).sum() + (out.alpha * torch.rand(out.alpha.shape, generator=g)).sum()
             + (out.group_alpha[1] * torch.rand(out.alpha.shape, generator=g)).sum() + 0.1 * out.depth.sum())
@@ -156,7 +160,7 @@ def test_torch_reference_gradients_match_finite_differences():
 
     def image(means, quats, scales, opacities, colors):
         out = rasterize(cam, means=means, quats=quats, scales=scales, opacities=opacities, colors=colors,
-                        background=torch.tensor([0.3, 0.2, 0.1], dtype=torch.float64), backend="torch")
+                        background=torch.tensor([0.3, 0.2, 0.1], dtype=torch.float64), settings=settings("torch"))
         return out.rgb
 
     inputs = [t.requires_grad_(True) for t in (means, quats, scales, opacities, colors)]
@@ -171,7 +175,7 @@ def test_a_single_gaussian_has_the_closed_form_image(backend):
     sigma, z, o = 0.05, 2.0, 0.8
     out = rasterize(cam, means=torch.tensor([[0.0, 0.0, z]]), quats=torch.tensor([[1.0, 0, 0, 0]]),
                     scales=torch.full((1, 3), sigma), opacities=torch.tensor([o]), colors=torch.ones(1, 3),
-                    backend=backend)
+                    settings=settings(backend))
     s2 = (40.0 * sigma / z) ** 2 + LOW_PASS
     v, u = torch.meshgrid(torch.arange(25.0), torch.arange(33.0), indexing="ij")
     expected = o * torch.exp(-((u - 16.0) ** 2 + (v - 12.0) ** 2) / (2 * s2))
@@ -189,7 +193,7 @@ def test_a_projected_point_lands_on_its_pixel(backend):
         ray = torch.linalg.solve(cam.K, torch.tensor([u, v, 1.0])) * 2.5  # camera frame point at depth 2.5
         world = cam.R.T @ (ray - cam.t)
         out = rasterize(cam, means=world[None], quats=torch.tensor([[1.0, 0, 0, 0]]), scales=torch.full((1, 3), 0.01),
-                        opacities=torch.tensor([0.9]), colors=torch.ones(1, 3), backend=backend)
+                        opacities=torch.tensor([0.9]), colors=torch.ones(1, 3), settings=settings(backend))
         assert divmod(int(out.alpha.argmax()), 50) == (v, u)
         assert out.alpha[v, u - 1] == pytest.approx(float(out.alpha[v, u + 1]), abs=1e-5)  # float32 round trip
 
@@ -201,18 +205,18 @@ def test_groups_background_sh_and_screen_gradients():
     background = torch.tensor([0.2, 0.4, 0.6])
     a = rasterize(cam, means=params["means"], quats=params["quats"], scales=params["scales"],
                   opacities=params["opacities"], colors=params["colors"], background=background,
-                  groups=torch.arange(200) % 4, num_groups=4, backend="torch")
+                  groups=torch.arange(200) % 4, num_groups=4, settings=settings("torch"))
     b = rasterize(cam, means=params["means"], quats=params["quats"], scales=params["scales"],
-                  opacities=params["opacities"], sh=sh, background=background, backend="torch")
+                  opacities=params["opacities"], sh=sh, background=background, settings=settings("torch"))
     torch.testing.assert_close(a.rgb, b.rgb, rtol=0, atol=1e-6)
     torch.testing.assert_close(a.group_alpha.sum(0), a.alpha, rtol=0, atol=1e-6)
     none = rasterize(cam, means=params["means"][:0], quats=params["quats"][:0], scales=params["scales"][:0],
                      opacities=params["opacities"][:0], colors=params["colors"][:0], background=background,
-                     backend="torch")
+                     settings=settings("torch"))
     torch.testing.assert_close(none.rgb, background.expand(48, 64, 3))
     means = params["means"].clone().requires_grad_(True)
     out = rasterize(cam, means=means, quats=params["quats"], scales=params["scales"], opacities=params["opacities"],
-                    colors=params["colors"], backend="torch")
+                    colors=params["colors"], settings=settings("torch"))
     out.means2d.retain_grad()
     out.rgb.sum().backward()
     assert out.means2d.grad is not None and (out.means2d.grad[out.visible].abs().sum(1) > 0).float().mean() > 0.5
@@ -222,7 +226,7 @@ def test_groups_background_sh_and_screen_gradients():
 def test_hidden_gaussians_are_culled():
     params = scene("behind", n=90)
     out = rasterize(camera(), means=params["means"], quats=params["quats"], scales=params["scales"],
-                    opacities=params["opacities"], colors=params["colors"], backend="torch")
+                    opacities=params["opacities"], colors=params["colors"], settings=settings("torch"))
     assert not out.visible[:30].any() and (out.radii[:30] == 0).all()
 
 

@@ -117,8 +117,8 @@ def test_a_new_motion_starts_where_the_person_stands_and_heads_their_way():
 
 
 def test_the_removal_video_tints_the_never_seen_background(tmp_path):
+    from glimpse.eval.renders import NEVER_SEEN_TINT, with_never_seen
     from glimpse.io.images import write_png
-    from glimpse.replay.standard import NEVER_SEEN_TINT, with_never_seen
 
     image = np.full((4, 6, 3), 100, np.uint8)
     mask = np.zeros((4, 6), bool)

@@ -19,22 +19,30 @@ import torch
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import orbit_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
-from glimpse.losses import HARD_SURFACE_OFFSET
-from glimpse.crops.skeleton import OPENPOSE18_COLOURS
-from glimpse.prior.orbit import orbit_camera
+from glimpse.gaussians.model import GaussianModel
+from glimpse.metrics.losses import HARD_SURFACE_OFFSET
 from glimpse.prior.sds.cameras import PART_JOINTS, SDSCameraConfig, fovy_deg, sample_view, view_kind, zoomed_camera
-from glimpse.prior.sds.control import skeleton_image
 from glimpse.prior.sds.config import DiffusionConfig
-from glimpse.prior.sds.guidance import (DiffusionModels, SDSConfig, SDSText, add_noise, denoised_latents,
-                                        encode_images, encode_text, sds_loss)
+from glimpse.prior.sds.control import skeleton_image
+from glimpse.prior.sds.guidance import (
+    DiffusionModels,
+    SDSConfig,
+    SDSText,
+    add_noise,
+    denoised_latents,
+    encode_images,
+    encode_text,
+    sds_loss,
+)
 from glimpse.prior.sds.load import check_weight_paths, diffusion_device, load_diffusion
 from glimpse.prior.sds.prompts import PromptConfig, view_prompts
 from glimpse.prior.sds.schedule import TimestepConfig, recon_weight, sample_timestep, timestep_range
-from glimpse.render import rasterize
-from glimpse.background.stage import render_camera
-from glimpse.gaussians.model import GaussianModel
+from glimpse.prior.skeleton import OPENPOSE18_COLOURS
+from glimpse.render import RenderConfig, rasterize
 
 diffusers = pytest.importorskip("diffusers")
 from tests.tiny_diffusion import RENDER_PX, tiny_models, write_tiny_weights  # noqa: E402
@@ -237,7 +245,8 @@ def _gaussians(seed: int, offset: float) -> GaussianModel:
 def test_sds_gradients_reach_the_guided_persons_colours_and_positions_only(models, text):
     guided, other = _gaussians(0, 0.0), _gaussians(1, 3.0)
     camera = render_camera(orbit_camera(np.zeros(3), 0.0, 0.0, 2.2, 49.1, 48), 48, 48, torch.device("cpu"))
-    rgb = rasterize(camera, **guided.render_inputs(0), background=torch.ones(3)).rgb  # the guided person alone
+    rgb = rasterize(camera, **guided.render_inputs(0), background=torch.ones(3),
+                    settings=RenderConfig("auto", 0, antialiased=False)).rgb  # the guided person alone
     loss, _ = sds_loss(models, rgb.permute(2, 0, 1)[None], torch.zeros(1, 3, RENDER_PX, RENDER_PX), text, 700,
                        torch.Generator().manual_seed(0), SDS)
     loss.backward()
@@ -283,8 +292,12 @@ def test_missing_or_wrong_weights_are_refused_with_the_parameter_to_set(tmp_path
 
 
 def test_the_test_checkpoints_are_in_the_original_layouts_diffusers_converts():
-    from diffusers.loaders.single_file_utils import (convert_controlnet_checkpoint, convert_ldm_unet_checkpoint,
-                                                     convert_ldm_vae_checkpoint)
+    from diffusers.loaders.single_file_utils import (
+        convert_controlnet_checkpoint,
+        convert_ldm_unet_checkpoint,
+        convert_ldm_vae_checkpoint,
+    )
+
     from tests.original_checkpoints import original_controlnet_state, original_state
 
     unet, controlnet, vae, text_encoder, _, _ = tiny_models(Path(tempfile.mkdtemp()))
@@ -316,6 +329,7 @@ def test_single_file_checkpoints_load_with_local_configs(tmp_path):
 
 def test_a_single_file_that_does_not_fit_its_configs_is_refused_naming_both(tmp_path):
     from safetensors.torch import load_file, save_file
+
     from tests.original_checkpoints import write_original_checkpoints
 
     files = write_original_checkpoints(tmp_path)
@@ -347,7 +361,6 @@ def _sds_prior(tmp_path, body_model, combine: str = "separate_steps", preview_di
     from glimpse.humans.visibility import BodyVisibility
     from glimpse.prior import PriorContext, make_prior
     from glimpse.prior.sds.identity import new_identity, save_identity
-    from glimpse.render.config import RenderConfig
 
     sd, controlnet = write_tiny_weights(tmp_path / "weights")
     config = replace(DIFFUSION, sd_path=str(sd), controlnet_path=str(controlnet), allow_cpu=True, start_at=10,

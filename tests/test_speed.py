@@ -1,5 +1,5 @@
 """Rendering finished runs fast: a frozen person's posing (the C++ kernel and the cached PyTorch path)
-against the training path, and the render-speed measurement (glimpse/replay/speed.py): the memory
+against the training path, and the render-speed measurement (glimpse/eval/speed.py): the memory
 probe, the novel-pose set-up it times, what it reports (stage 07's speed.json: tests/test_joint.py)."""
 
 from __future__ import annotations
@@ -10,18 +10,18 @@ import numpy as np
 import pytest
 import torch
 
-from glimpse.background.stage import render_camera
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.model import BodyModel
 from glimpse.body.motion import builtin_motion
 from glimpse.body.params import BodyParams
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import orbit_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError
 from glimpse.eval.config import SpeedConfig
+from glimpse.eval.speed import PeakMemory, driven_in_body_frame, evenly_spread, time_novel_pose
 from glimpse.humans.person import initial_person
-from glimpse.prior.orbit import orbit_camera
-from glimpse.render import rasterize
-from glimpse.replay.speed import PeakMemory, driven_in_body_frame, evenly_spread, time_novel_pose
+from glimpse.render import RenderConfig, rasterize
 
 PIPELINE = load_pipeline_yaml()
 BODY = config_from_mapping(BodyConfig, PIPELINE["body"], "body")
@@ -92,7 +92,7 @@ def test_the_driven_person_walks_at_the_pelvis_the_camera_circles(person):
                            size, size, CPU)
     posed = driven.posed(3, camera.centre, 0)
     alpha = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
-                      colors=posed.colors).alpha
+                      colors=posed.colors, settings=RenderConfig("auto", 0, antialiased=False)).alpha
     rows = torch.nonzero(alpha.amax(dim=1) > 0.5)[:, 0]
     height = (rows.max() - rows.min() + 1) / size
     assert 0.55 < height < 0.85  # as the protocol says: the body fills about 70% of the image height
@@ -100,7 +100,7 @@ def test_the_driven_person_walks_at_the_pelvis_the_camera_circles(person):
 
 def test_a_timing_counts_the_persons_gaussians_and_its_parts(person):
     config = dataclasses.replace(SPEED, frames=3, warmup_frames=1)
-    timing = time_novel_pose(person, builtin_motion("walk", 3, 30.0), 48, config, 2, "cpu", CPU)
+    timing = time_novel_pose(person, builtin_motion("walk", 3, 30.0), 48, config, RenderConfig("cpu", 2, antialiased=False), CPU)
     assert timing.gaussians == len(person.model) and (timing.width, timing.height, timing.frames) == (48, 48, 3)
     assert timing.posing_ms > 0 and timing.raster_ms > 0 and timing.fps == pytest.approx(1000 / timing.ms_per_frame)
     assert timing.as_dict()["fps"] == pytest.approx(timing.fps, abs=0.01)

@@ -50,7 +50,7 @@ def test_seen_weights_are_each_gaussians_blending_weight_over_background_pixels(
     for i in range(n):
         onehot = torch.zeros(n, 3)
         onehot[i, 0] = 1.0
-        rendered = rasterize(view.camera, **inputs, colors=onehot).rgb[..., 0]
+        rendered = rasterize(view.camera, **inputs, colors=onehot, settings=RENDER).rgb[..., 0]
         assert weights[i] == pytest.approx(2 * float(rendered[background].sum()), rel=1e-4, abs=1e-6)
 
 
@@ -170,7 +170,7 @@ def test_a_checkpoint_of_other_parameters_is_not_resumed(tmp_path):
     ply = (first / "background.ply").read_bytes()
     work = run_dir / ".work" / "04_bg_pretrain"
     work.mkdir(parents=True)
-    from glimpse.pipeline.checkpoint import save_checkpoint
+    from glimpse.io.checkpoint import save_checkpoint
 
     save_checkpoint(work / "checkpoint.pt", "another configuration", {"step": 10})
     again = run("04_bg_pretrain", scene, tmp_path / "out", params)

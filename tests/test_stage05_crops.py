@@ -14,15 +14,22 @@ import torch
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.crops.box import CropBox, background_colour, crop_padded, resize_square, soft_mask, square_box
-from glimpse.crops.skeleton import (
-    FACE_KEYPOINTS, HEAD_JOINT, LIMB_SHADE, OPENPOSE18_COLOURS, OPENPOSE18_LIMBS, OPENPOSE18_NAMES, draw_skeleton,
-    hidden_face, shown_keypoints,
-)
 from glimpse.crops.stage import evenly_spaced, identity_plan
-from glimpse.crops.view import facing_azimuth_deg, view_prompt, view_word
 from glimpse.errors import ConfigError
 from glimpse.fixtures.scenes import FREE_BODY, make_scene
 from glimpse.io.images import read_mask, read_rgb, write_png
+from glimpse.prior.skeleton import (
+    FACE_KEYPOINTS,
+    HEAD_JOINT,
+    LIMB_SHADE,
+    OPENPOSE18_COLOURS,
+    OPENPOSE18_LIMBS,
+    OPENPOSE18_NAMES,
+    draw_skeleton,
+    hidden_face,
+    shown_keypoints,
+)
+from glimpse.prior.views import facing_azimuth_deg, view_prompt, view_word
 from tests.stage_helpers import read_json, run
 
 STAGE = "05_textual_inversion"

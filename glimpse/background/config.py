@@ -8,11 +8,7 @@ from typing import Literal
 from glimpse.errors import ConfigError
 from glimpse.gaussians.density import DensifyConfig
 from glimpse.gaussians.optim import LearningRates
-
-
-def scaled_iteration(iteration: int, factor: float) -> int:
-    """An absolute iteration of the paper's schedule in a run shortened by ``factor`` (at least 1)."""
-    return max(1, int(round(iteration * factor)))
+from glimpse.gaussians.training import BackgroundColour, scaled_iteration
 
 
 @dataclass(frozen=True)
@@ -29,7 +25,7 @@ class BackgroundConfig:
     human_mask_dilate_px: float
     photometric: Literal["l1", "mse"]
     dssim_weight: float
-    background_colour: Literal["random", "black", "white"]
+    background_colour: BackgroundColour
     sh_degree_every: int
     lr: LearningRates
     densify: DensifyConfig

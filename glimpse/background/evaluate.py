@@ -22,7 +22,7 @@ from torch import Tensor
 
 from glimpse.background.train import TrainingView
 from glimpse.gaussians.model import GaussianModel
-from glimpse.metrics import psnr
+from glimpse.metrics.image import psnr
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
 
@@ -35,7 +35,7 @@ def seen_weights(model: GaussianModel, views: list[TrainingView], render: Render
     total = torch.zeros(len(model), device=model.means.device)
     for view in views:
         probe = torch.zeros(len(model), 3, device=model.means.device, requires_grad=True)
-        out = rasterize(view.camera, **inputs, colors=probe, backend=render.backend, antialiased=render.antialiased)
+        out = rasterize(view.camera, **inputs, colors=probe, settings=render)
         (out.rgb[..., 0] * view.background).sum().backward()
         total += probe.grad[:, 0]
     return total
@@ -102,8 +102,7 @@ def render_views(model: GaussianModel, views: list[TrainingView], render: Render
     test = SeenTest(views)
     with torch.no_grad():
         for view in views:
-            out = rasterize(view.camera, **model.render_inputs(), backend=render.backend,
-                            antialiased=render.antialiased)
+            out = rasterize(view.camera, **model.render_inputs(), settings=render)
             rgb = out.rgb.clamp(0.0, 1.0)
             value = psnr(rgb, view.target(), view.background) if bool(view.background.any()) else torch.tensor(float("nan"))
             seen = test.seen(backproject(view.camera, out.depth)).reshape(out.alpha.shape)

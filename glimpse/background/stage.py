@@ -4,7 +4,6 @@ renders and the report. The stage's run.py only parses, loads and writes what th
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,17 +13,17 @@ import torch
 from glimpse.background.config import BackgroundConfig
 from glimpse.background.evaluate import render_views, seen_weights
 from glimpse.background.init import InitialCloud, Sphere, colour_from_frames, sphere_points
-from glimpse.background.train import BackgroundTrainer, TrainingLog, TrainingView, scene_extent
+from glimpse.background.train import BackgroundTrainer, TrainingLog, TrainingView
 from glimpse.body.params import BodyParams
-from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.gaussians.density import keep_only
 from glimpse.gaussians.model import GaussianModel, knn_scales
+from glimpse.gaussians.training import scene_extent
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.io.ply_points import read_points_ply
 from glimpse.io.video import write_mp4
-from glimpse.masks.assign import disk
-from glimpse.render import Camera
+from glimpse.morphology import disk
 from glimpse.render.config import RenderConfig
 
 INIT_FORMAT = "glimpse-bg-init/1"
@@ -42,13 +41,6 @@ class BackgroundInputs:
     points_ply: Path | None  # stage 01's points.ply (absent for a static camera)
     bodies: dict[str, BodyParams]  # stage 02's
     fps: float
-
-
-def render_camera(camera: PinholeCamera, width: int, height: int, device: torch.device) -> Camera:
-    def tensor(a: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(a, dtype=np.float32), device=device)
-
-    return Camera(tensor(camera.K), tensor(camera.R), tensor(camera.t), width, height)
 
 
 def load_views(inputs: BackgroundInputs, config: BackgroundConfig, device: torch.device) -> list[TrainingView]:
@@ -181,6 +173,3 @@ def _training_doc(training: TrainingLog, config: BackgroundConfig, count: int, u
             "gaussians": count, "gaussians_never_seen": unseen, "never_seen_pruned": pruned,
             "densify_events": training.densify_events, "loss_history": training.losses}
 
-
-def write_json(path: Path, doc: dict) -> None:
-    path.write_text(json.dumps(doc, indent=1) + "\n")

@@ -17,7 +17,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import Tensor
 from tqdm import tqdm
@@ -27,13 +26,13 @@ from glimpse.background.init import Sphere
 from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
-from glimpse.losses import dssim_loss_on, l1_loss, mse_loss
-from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.gaussians.training import scene_extent, training_background, view_order
+from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.metrics.losses import dssim_loss_on, l1_loss, mse_loss
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
 
 log = logging.getLogger("glimpse")
-FIXED_COLOURS = {"black": (0.0, 0.0, 0.0), "white": (1.0, 1.0, 1.0)}
 LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
 
 
@@ -63,26 +62,6 @@ class TrainingLog:
     @property
     def iterations_per_s(self) -> float:
         return self.iterations_run / self.seconds if self.seconds > 0 else 0.0
-
-
-def scene_extent(cameras: list[Camera], points: Tensor) -> float:
-    """3DGS's ``cameras_extent`` (1.1 x the largest distance of a camera centre from their mean), or,
-    when the cameras barely move (a static camera), the median distance of the initial points from the
-    cameras' mean centre, whichever is larger."""
-    centres = torch.stack([c.centre for c in cameras])
-    mean = centres.mean(0)
-    spread = 1.1 * float((centres - mean).norm(dim=1).max())
-    return max(spread, float((points - mean.to(points)).norm(dim=1).median()))
-
-
-def training_background(config: BackgroundConfig, seed: int, step: int, device: torch.device) -> Tensor:
-    if config.background_colour in FIXED_COLOURS:
-        return torch.tensor(FIXED_COLOURS[config.background_colour], device=device)
-    return torch.as_tensor(np.random.default_rng([seed, step]).random(3), dtype=torch.float32, device=device)
-
-
-def view_order(seed: int, epoch: int, count: int) -> np.ndarray:
-    return np.random.default_rng([seed, epoch, 1]).permutation(count)
 
 
 def photometric_loss(config: BackgroundConfig, rendered: Tensor, target: Tensor, background: Tensor) -> Tensor:
@@ -140,8 +119,8 @@ class BackgroundTrainer:
         view = self.views[int(view_order(self.seed, epoch, len(self.views))[slot])]
         degree = min((step - 1) // config.scaled_sh_degree_every, self.render.sh_degree)
         out = rasterize(view.camera, **self.model.render_inputs(degree),
-                        background=training_background(config, self.seed, step, view.image.device),
-                        backend=self.render.backend, antialiased=self.render.antialiased)
+                        background=training_background(config.background_colour, self.seed, step, view.image.device),
+                        settings=self.render)
         out.means2d.retain_grad()
         loss = photometric_loss(config, out.rgb, view.target(), view.background)
         total = loss + sphere_regulariser(self.model.means, self.sphere, config.sphere_reg_weight) if self.sphere else loss

@@ -14,18 +14,20 @@ mesh renderer (``<scene>.groundtruth/background/``), on three kinds of pixels:
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
+from glimpse.cameras.model import render_camera
+from glimpse.config import config_from_mapping
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.ply import read_gaussians_ply
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
-from glimpse.metrics import psnr
-from glimpse.render import rasterize
+from glimpse.metrics.image import psnr
+from glimpse.render import RenderConfig, rasterize
 
 REPORT_KEYS = {"visible": "psnr_visible_db", "behind": "psnr_behind_people_db",
                "frame_behind": "psnr_frame_behind_people_db"}
@@ -42,8 +44,16 @@ def _psnr(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float | None:
     return float(psnr(torch.as_tensor(a / 255.0), torch.as_tensor(b / 255.0), torch.as_tensor(mask)))
 
 
+def stage_render_settings(stage_dir: Path) -> RenderConfig:
+    """The ``render`` section a finished stage ran with (its manifest's parameters)."""
+    manifest = stage_dir / "manifest.json"
+    return config_from_mapping(RenderConfig, json.loads(manifest.read_text())["params"]["render"], f"{manifest} render")
+
+
 def judge_background(stage_dir: Path, sfm_dir: Path, scene: Path, static_camera: bool) -> dict:
-    """Mean PSNRs (dB) over frames on each kind of pixel, and the never-seen recall (static camera)."""
+    """Mean PSNRs (dB) over frames on each kind of pixel, and the never-seen recall (static camera), of stage 04's
+    background drawn with the render settings the stage ran with."""
+    render = stage_render_settings(stage_dir)
     truth_dir = scene.with_name(scene.name + ".groundtruth") / "background"
     model = GaussianModel.from_splats(read_gaussians_ply(stage_dir / "background.ply")[0])
     width, height, cameras = read_cameras_json(sfm_dir / "cameras.json")
@@ -54,7 +64,7 @@ def judge_background(stage_dir: Path, sfm_dir: Path, scene: Path, static_camera:
     never_found, visible_unseen = [], []
     for fid, camera in sorted(cameras.items()):
         with torch.no_grad():
-            out = rasterize(render_camera(camera, width, height, torch.device("cpu")), **model.render_inputs())
+            out = rasterize(render_camera(camera, width, height, torch.device("cpu")), **model.render_inputs(), settings=render)
         rendered = (out.rgb.clamp(0, 1) * 255).round().numpy()
         truth = read_rgb(truth_dir / f"{frame_name(fid)}.png").astype(np.float64)
         found = read_mask(stage_dir / "never_seen" / f"{frame_name(fid)}.png")

@@ -1,4 +1,5 @@
-"""Camera records shared by every stage (OpenCV pinhole, world-to-camera)."""
+"""The camera record shared by every stage (OpenCV pinhole, world-to-camera) and its conversion to the
+rasterizer's camera."""
 
 from __future__ import annotations
 
@@ -6,6 +7,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import torch
+
+from glimpse.render import Camera
 
 
 @dataclass(frozen=True)
@@ -43,3 +47,11 @@ def default_intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
         raise ValueError(f"field of view must be in (0, 180) degrees, found {fov_deg}")
     focal = 0.5 * max(width, height) / math.tan(math.radians(fov_deg) / 2.0)
     return np.array([[focal, 0.0, (width - 1) / 2.0], [0.0, focal, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def render_camera(camera: PinholeCamera, width: int, height: int, device: torch.device) -> Camera:
+    """The rasterizer's camera (float32 tensors on ``device``) for ``camera`` at an image of width x height."""
+    def tensor(a: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(a, dtype=np.float32), device=device)
+
+    return Camera(tensor(camera.K), tensor(camera.R), tensor(camera.t), width, height)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from glimpse.masks.assign import disk
+from glimpse.morphology import disk
 
 COLOUR_LEVELS = 256  # background colours are uniform over the 8-bit RGB cube
 SEED_MASK = 0xFFFFFFFF  # the seed enters numpy's SeedSequence as an unsigned 32-bit word

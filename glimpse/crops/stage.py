@@ -24,15 +24,26 @@ from glimpse.body.model import NUM_JOINTS, BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.crops.box import (
-    CropBox, background_colour, composite, crop_padded, resize_square, soft_mask, square_box, to_uint8,
+    CropBox,
+    background_colour,
+    composite,
+    crop_padded,
+    resize_square,
+    soft_mask,
+    square_box,
+    to_uint8,
 )
 from glimpse.crops.config import CropsConfig
-from glimpse.crops.skeleton import (
-    HEAD_JOINT, OPENPOSE18_NAMES, draw_skeleton, hidden_face, shown_keypoints,
-)
-from glimpse.crops.view import VIEWS, facing_azimuth_deg, person_token, view_prompt, view_word
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.prior import resolve_prior_kind
+from glimpse.prior.skeleton import (
+    HEAD_JOINT,
+    OPENPOSE18_NAMES,
+    draw_skeleton,
+    hidden_face,
+    shown_keypoints,
+)
+from glimpse.prior.views import VIEWS, facing_azimuth_deg, person_token, view_prompt, view_word
 
 CROPS_FORMAT = "glimpse-crops/1"
 KEYPOINT_LAYOUT = "openpose18"

@@ -10,7 +10,7 @@ from glimpse.errors import ConfigError
 
 @dataclass(frozen=True)
 class RenderSetConfig:
-    """The videos of stage 07's renders/ (glimpse.replay.standard)."""
+    """The videos of stage 07's renders/ (glimpse.eval.renders)."""
 
     enabled: bool
     every: int  # frames: the videos over time use every this many input frames
@@ -27,7 +27,7 @@ class RenderSetConfig:
 
 @dataclass(frozen=True)
 class SpeedConfig:
-    """speed.json: novel-pose and whole-scene render speed (glimpse.replay.speed)."""
+    """speed.json: novel-pose and whole-scene render speed (glimpse.eval.speed)."""
 
     enabled: bool
     sizes_px: list[int]  # square image sides of the novel-pose timings

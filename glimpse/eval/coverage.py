@@ -1,7 +1,7 @@
 """Holes in a person's canonical Gaussians: how much of the body's own silhouette they leave see-through.
 
 The person is rendered alone in the canonical pose from ``views`` azimuths evenly spread over a turn
-(elevation 0, the turntables' cameras, glimpse.prior.orbit.turn_cameras); the fitted body's mesh,
+(elevation 0, the turntables' cameras, glimpse.cameras.orbit.turn_cameras); the fitted body's mesh,
 rasterized from the same cameras and eroded by ``erode_px`` (its outline is allowed to be soft),
 says where the person should be opaque. A hole is a pixel there whose alpha is below
 ``alpha_below``. The share of holes is reported per person; 0 means the body is covered everywhere.
@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import box_centre, turn_cameras
 from glimpse.humans.person import PersonGaussians
-from glimpse.masks.assign import disk
-from glimpse.prior.orbit import box_centre, turn_cameras
-from glimpse.render import rasterize
+from glimpse.morphology import disk
+from glimpse.render import RenderConfig, rasterize
 from glimpse.render.mesh_raster import rasterize_triangles
 
 
@@ -33,7 +33,7 @@ class CoverageConfig:
 
 
 @torch.no_grad()
-def canonical_hole_share(person: PersonGaussians, faces: np.ndarray, config: CoverageConfig, backend: str,
+def canonical_hole_share(person: PersonGaussians, faces: np.ndarray, config: CoverageConfig, render: RenderConfig,
                          device: torch.device) -> float:
     """Share (0..1) of the person's canonical body-silhouette pixels (the body model's ``faces [F, 3]`` over
     the rig's canonical vertices), over every view, that their Gaussians leave more transparent than
@@ -46,7 +46,7 @@ def canonical_hole_share(person: PersonGaussians, faces: np.ndarray, config: Cov
         body = rasterize_triangles(points @ pinhole.R.T + pinhole.t, faces, pinhole.K, size, size).face >= 0
         inside = disk(body, config.erode_px, grow=False)
         alpha = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(0),
-                          backend=backend).alpha.reshape(size, size).cpu().numpy()
+                          settings=render).alpha.reshape(size, size).cpu().numpy()
         holes += int((alpha[inside] < config.alpha_below).sum())
         pixels += int(inside.sum())
     return holes / max(pixels, 1)

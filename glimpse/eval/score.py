@@ -25,15 +25,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
+from glimpse.cameras.model import render_camera
 from glimpse.eval.never_seen import PosedBodies, flat_bodies
 from glimpse.eval.views import ScoredView, ViewSet
 from glimpse.gaussians.model import GaussianModel
+from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
-from glimpse.joint.compose import frame_gaussians, render_frame
-from glimpse.lpips import LPIPS
-from glimpse.metrics_table import (
-    EvalProtocol, FrameMetrics, MetricsRow, frame_metrics, summarize, table_json, table_markdown,
+from glimpse.metrics.lpips import LPIPS
+from glimpse.metrics.table import (
+    EvalProtocol,
+    FrameMetrics,
+    MetricsRow,
+    frame_metrics,
+    summarize,
+    table_json,
+    table_markdown,
 )
 from glimpse.render.config import RenderConfig
 

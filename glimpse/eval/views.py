@@ -11,7 +11,7 @@ import numpy as np
 from glimpse.cameras.model import PinholeCamera
 from glimpse.eval.config import EvalConfig
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
-from glimpse.scene.model import EvalCamera, Scene
+from glimpse.scene.model import Scene
 
 
 @dataclass(frozen=True)
@@ -41,13 +41,6 @@ class ViewSet:
     views: list[ScoredView]
 
 
-def eval_camera_at(cam: EvalCamera, frame_id: int) -> PinholeCamera:
-    """A held-out camera at ``frame_id``: its per-frame pose (and intrinsics) where given, else its one pose."""
-    pose = cam.poses.get(frame_id)
-    K = pose.K if pose is not None and pose.K is not None else cam.K
-    return PinholeCamera(K, pose.R if pose else cam.R, pose.t if pose else cam.t)
-
-
 def heldout_views(scene: Scene, world_is_scene_frame: bool) -> list[ScoredView]:
     """Every image of every eval/ camera (its per-frame pose where given)."""
     if not world_is_scene_frame:
@@ -55,7 +48,7 @@ def heldout_views(scene: Scene, world_is_scene_frame: bool) -> list[ScoredView]:
     views = []
     for name, cam in sorted(scene.eval_cameras.items()):
         for fid in sorted(cam.images):
-            camera = eval_camera_at(cam, fid)
+            camera = cam.camera_at(fid)
             masks = {pid: frames[fid] for pid, frames in cam.person_masks.items() if fid in frames}
             views.append(ScoredView(f"{name}/{frame_name(fid)}", fid, camera, cam.width, cam.height, cam.images[fid],
                                     cam.union_masks[fid], masks))

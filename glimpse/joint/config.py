@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Literal
 
-from glimpse.background.config import scaled_iteration
 from glimpse.errors import ConfigError
 from glimpse.gaussians.optim import LearningRates
+from glimpse.gaussians.training import scaled_iteration
 from glimpse.humans.visibility import VisibilityConfig
 
 

@@ -11,22 +11,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
 from glimpse.body.config import BodyConfig
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
-from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.gaussians.model import GaussianModel
+from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians, initial_person
 from glimpse.humans.visibility import BodyVisibility, body_visibility
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.io.video import write_mp4
-from glimpse.joint.compose import frame_gaussians, render_frame
 from glimpse.joint.config import JointConfig
 from glimpse.joint.train import JointLog, JointTrainer, JointView, people_box
-from glimpse.lpips import LPIPS
-from glimpse.metrics import psnr
+from glimpse.metrics.image import psnr
+from glimpse.metrics.lpips import LPIPS
 from glimpse.prior import PriorContext, make_prior
 from glimpse.render.config import RenderConfig
 

@@ -31,16 +31,16 @@ import torch
 from torch import Tensor
 from tqdm import tqdm
 
-from glimpse.background.train import scene_extent, training_background, view_order
 from glimpse.gaussians.density import DensifyConfig, DensityStats, densify_and_prune, keep_only
 from glimpse.gaussians.model import GaussianModel, logit
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.gaussians.training import scene_extent, training_background, view_order
+from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
-from glimpse.joint.compose import frame_gaussians, render_frame
+from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
 from glimpse.joint.config import JointConfig
-from glimpse.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_loss
-from glimpse.lpips import LPIPS
-from glimpse.pipeline.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.metrics.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_loss
+from glimpse.metrics.lpips import LPIPS
 from glimpse.prior.base import UnseenPrior
 from glimpse.render import Camera, RenderOutput
 from glimpse.render.config import RenderConfig
@@ -185,7 +185,7 @@ class JointTrainer:
         human_degree = config.human_sh_degree(step, self.render.sh_degree)
         gaussians = frame_gaussians(view.camera, view.frame_id, self.people, human_degree, self.background,
                                     self.background_degree)
-        colour = training_background(config, self.seed, step, view.image.device)
+        colour = training_background(config.background_colour, self.seed, step, view.image.device)
         out = render_frame(view.camera, gaussians, len(self.people), self.render, colour)
         out.means2d.retain_grad()
         present = list(gaussians.rows)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from glimpse.masks.assign import disk
+from glimpse.morphology import disk
 
 
 def grabcut_region(image: np.ndarray, region: np.ndarray, sure: np.ndarray, forbidden: np.ndarray, band_px: float,

@@ -27,7 +27,11 @@ from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.masks.assign import (
-    FrameMasks, body_frame_masks, disk, plate_refiner, provided_frame_masks, static_in_front,
+    FrameMasks,
+    body_frame_masks,
+    plate_refiner,
+    provided_frame_masks,
+    static_in_front,
 )
 from glimpse.masks.config import MasksConfig
 from glimpse.masks.layers import BodyLayers, body_layers
@@ -35,6 +39,7 @@ from glimpse.masks.plate import Plate, median_plate
 from glimpse.masks.refine import grabcut_region
 from glimpse.masks.sam import SamOnnx
 from glimpse.masks.static import SurfaceMotion, temporal_std
+from glimpse.morphology import disk
 from glimpse.scene import Scene
 
 MASKS_FORMAT = "glimpse-masks/1"

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from glimpse.background.config import BackgroundConfig
 from glimpse.body.config import BodyConfig
-from glimpse.cameras.config import CamerasConfig
 from glimpse.compute import ComputeConfig
 from glimpse.crops.config import CropsConfig
 from glimpse.eval.config import EvalConfig
@@ -15,6 +14,7 @@ from glimpse.masks.config import MasksConfig
 from glimpse.prior.config import PriorConfig, SurfacePriorConfig
 from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.render.config import RenderConfig
+from glimpse.sfm.config import CamerasConfig
 
 SECTION_CONFIGS: dict[str, type] = {
     "compute": ComputeConfig,

@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from glimpse.cameras.orbit import OrbitConfig
 from glimpse.errors import ConfigError
-from glimpse.prior.orbit import OrbitConfig
 
 PriorKind = Literal["auto", "none", "surface", "sds"]
 

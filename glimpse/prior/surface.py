@@ -18,7 +18,7 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
   one, by how much: the needles ("hedgehogs", paper Fig. 3) a single view leaves behind.
 - ``loss_prior_silhouette``: one person (in turn) rendered alone in the canonical frame from one of
-  ``views_per_person`` fixed random orbit cameras (glimpse.prior.orbit), against that view's body
+  ``views_per_person`` fixed random orbit cameras (glimpse.cameras.orbit), against that view's body
   silhouette: transparency inside the silhouette shrunk by ``silhouette_margin_m`` (holes) weighted
   ``silhouette_fill``, opacity outside it grown by the margin (spikes, floaters) ``silhouette_trim``.
 """
@@ -34,14 +34,14 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-from glimpse.background.stage import render_camera
 from glimpse.body.symmetry import mesh_edges, mirror_vertex_map
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import box_centre, sample_orbit_views
 from glimpse.humans.person import PersonGaussians
-from glimpse.masks.assign import disk
+from glimpse.morphology import disk
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
-from glimpse.prior.orbit import box_centre, sample_orbit_views
 from glimpse.render import Camera, rasterize
 from glimpse.render.mesh_raster import rasterize_triangles
 from glimpse.render.sh import sh_dc_to_rgb
@@ -209,7 +209,7 @@ class SurfacePrior(UnseenPrior):
         model = person.model
         out = rasterize(view.camera, means=model.means, opacities=model.opacities(), quats=model.quats,
                         scales=model.scales(), colors=sh_dc_to_rgb(model.sh_dc[:, 0]).clamp(0.0, 1.0),
-                        backend=self.render.backend, antialiased=self.render.antialiased)
+                        settings=self.render)
         fill = (1.0 - out.alpha[view.inside]).mean() if view.inside.any() else out.alpha.sum() * 0.0
         trim = out.alpha[view.outside].mean() if view.outside.any() else out.alpha.sum() * 0.0
         return self.config.silhouette_fill * fill + self.config.silhouette_trim * trim

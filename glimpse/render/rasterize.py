@@ -1,9 +1,10 @@
 """`rasterize`: one differentiable Gaussian-splatting call, three backends.
 
-    out = rasterize(camera, means=..., opacities=..., quats=..., scales=..., sh=..., background=...)
+    out = rasterize(camera, means=..., opacities=..., quats=..., scales=..., sh=..., background=...,
+                    settings=RenderConfig(backend="auto", sh_degree=3, antialiased=False))
     out.rgb [H, W, 3], out.alpha [H, W], out.depth [H, W], out.group_alpha [G, H, W]
 
-Backends (`backend=`, default "auto"): "cpu" (C++ tile compositing, hand-written
+Backends (``settings.backend``): "cpu" (C++ tile compositing, hand-written
 backward), "torch" (pure PyTorch, the reference and the fallback where no
 compiler exists), "gsplat" (gsplat's CUDA kernels, for CUDA tensors). "auto"
 picks gsplat for CUDA tensors, else cpu when its kernel builds, else torch.
@@ -18,19 +19,17 @@ the per-group alphas. Those sum to the alpha.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
-
 import torch
 from torch import Tensor
 
 from glimpse.render.binning import bin_gaussians
+from glimpse.render.config import Backend, RenderConfig
 from glimpse.render.composite_torch import composite_torch
 from glimpse.render.projection import (
     Camera, Projected, project_gaussians, project_gaussians_cpu, quat_scale_to_covariance,
 )
 from glimpse.render.sh import sh_to_rgb
 
-Backend = Literal["auto", "cpu", "torch", "gsplat"]
 TILE_SIZE = 16  # pixels per tile side
 
 
@@ -91,7 +90,7 @@ def rasterize(
     colors: Tensor | None = None, sh: Tensor | None = None, sh_degree: int | None = None,
     view_dirs: Tensor | None = None, background: Tensor | None = None,
     groups: Tensor | None = None, num_groups: int | None = None,
-    backend: Backend = "auto", antialiased: bool = False,
+    settings: RenderConfig,
 ) -> RenderOutput:
     """Render N Gaussians (world frame, metres) seen by ``camera``.
 
@@ -99,13 +98,14 @@ def rasterize(
     covariances [N, 3, 3] (a posed person's A Σ Aᵀ); either colors [N, 3] or sh [N, K, 3] with
     view_dirs [N, 3] (default: camera centre to mean; a posed person's caller rotates them into
     the canonical frame) and sh_degree (default from K); background [3] (default black);
-    groups [N] int in [0, num_groups) for per-group alphas.
+    groups [N] int in [0, num_groups) for per-group alphas. ``settings`` (the pipeline's ``render`` section,
+    passed whole so that every render path draws alike) picks the backend and the antialiasing.
     """
     if covariances is None:
         if quats is None or scales is None:
             raise ValueError("rasterize: give quats and scales, or covariances")
         covariances = quat_scale_to_covariance(quats, scales)
-    name = choose_backend(backend, means.device)
+    name = choose_backend(settings.backend, means.device)
     rgb = _colours(camera, means, colors, sh, sh_degree, view_dirs)
     if groups is not None and num_groups is None:
         num_groups = int(groups.max()) + 1 if len(groups) else 1
@@ -114,10 +114,10 @@ def rasterize(
 
         depths = (means @ camera.R.to(means)[2] + camera.t.to(means)[2])  # camera z
         image, projected = rasterize_gsplat(camera, means, covariances, opacities,
-                                            _features(rgb, depths, groups, num_groups or 0), antialiased)
+                                            _features(rgb, depths, groups, num_groups or 0), settings.antialiased)
     else:
         project = project_gaussians_cpu if name == "cpu" else project_gaussians
-        projected = project(means, covariances, opacities, camera, antialiased)
+        projected = project(means, covariances, opacities, camera, settings.antialiased)
         features = _features(rgb, projected.depths, groups, num_groups or 0)
         image = _composite(name, projected, features, camera)
     return _finish(image, projected, background, groups is not None, name)

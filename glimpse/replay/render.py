@@ -9,12 +9,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
 from glimpse.body.params import BodyParams
+from glimpse.cameras.model import render_camera
 from glimpse.errors import GlimpseError
+from glimpse.humans.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.images import rgb_to_uint8
-from glimpse.joint.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.replay.cameras import Shot
 from glimpse.replay.finished import FinishedRun
 

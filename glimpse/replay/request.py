@@ -58,7 +58,6 @@ def camera_shots(spec: str, run: FinishedRun, times: list[int], orbit_frames: in
 
 def heldout_shots(scene: Path | None, name: str, times: list[int]) -> list[Shot]:
     """A held-out camera of the scene's eval/: its pose at each time where it moves, else its one pose."""
-    from glimpse.eval.views import eval_camera_at
     from glimpse.scene import load_scene
 
     if scene is None:
@@ -68,5 +67,5 @@ def heldout_shots(scene: Path | None, name: str, times: list[int]) -> list[Shot]
         raise GlimpseError(f"{scene / 'eval'}: no held-out camera {name!r} (there are: "
                            f"{', '.join(sorted(cameras)) or 'none'})")
     cam = cameras[name]
-    shots = [Shot(eval_camera_at(cam, t), cam.width, cam.height) for t in times]
+    shots = [Shot(cam.camera_at(t), cam.width, cam.height) for t in times]
     return shots if any(cam.poses.get(t) for t in times) else shots[:1]

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from glimpse.cameras.model import PinholeCamera
+
 __all__ = [
     "CAMERAS_FORMAT",
     "EVAL_CAMERAS_FORMAT",
@@ -100,6 +102,12 @@ class EvalCamera:
     images: dict[int, Path]
     union_masks: dict[int, Path]
     person_masks: dict[str, dict[int, Path]]
+
+    def camera_at(self, frame_id: int) -> PinholeCamera:
+        """The camera at ``frame_id``: its per-frame pose (and intrinsics) where given, else its one pose."""
+        pose = self.poses.get(frame_id)
+        K = pose.K if pose is not None and pose.K is not None else self.K
+        return PinholeCamera(K, pose.R if pose else self.R, pose.t if pose else self.t)
 
 
 @dataclass(frozen=True)

@@ -16,13 +16,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.cameras.stage import estimate_cameras  # noqa: E402
 from glimpse.compute import apply_compute, resolved_threads  # noqa: E402
 from glimpse.io.cameras_json import CAMERAS_FORMAT, write_cameras_json  # noqa: E402
 from glimpse.io.colmap_text import write_colmap_text  # noqa: E402
 from glimpse.io.ply_points import POINTS_FORMAT, write_points_ply  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
+from glimpse.sfm.stage import estimate_cameras  # noqa: E402
 
 STAGE = "01_sfm"
 REPORT_FORMAT = "glimpse-cameras-report/1"

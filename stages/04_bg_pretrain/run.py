@@ -18,12 +18,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.background.stage import BackgroundInputs, train_background, write_json  # noqa: E402
+from glimpse.background.stage import BackgroundInputs, train_background  # noqa: E402
 from glimpse.body.params import read_body_params  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.gaussians.ply import GAUSSIANS_FORMAT, write_gaussians_ply  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
-from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
+from glimpse.io.checkpoint import fingerprint  # noqa: E402
+from glimpse.io.json_file import write_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 

@@ -25,7 +25,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.background.stage import write_json  # noqa: E402
 from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.params import BODY_PARAMS_FORMAT, read_body_params, write_body_params  # noqa: E402
@@ -33,10 +32,11 @@ from glimpse.body.skinning import SKINNING_FORMAT  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import GAUSSIANS_FORMAT, read_gaussians_ply, write_gaussians_ply  # noqa: E402
-from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.humans.visibility import VISIBILITY_FORMAT  # noqa: E402
+from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.io.checkpoint import fingerprint  # noqa: E402
+from glimpse.io.json_file import write_json  # noqa: E402
 from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
-from glimpse.pipeline.checkpoint import fingerprint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.prior import check_prior_kind  # noqa: E402
 from glimpse.prior.sds.load import check_sds_can_run, diffusion_ready  # noqa: E402

@@ -14,9 +14,9 @@ Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
                  never-seen tables; per-view values and each table's protocol
   metrics.md     the same tables in Markdown, each followed by its protocol
   renders/       input.mp4, heldout_<camera>.mp4, orbit.mp4, freeze.mp4, person_<pid>.mp4, removed_<pid>.mp4,
-                 motion_<pid>.mp4 (glimpse/replay/standard.py; 07_eval.renders)
+                 motion_<pid>.mp4 (glimpse/eval/renders.py; 07_eval.renders)
   speed.json     glimpse-speed/1: novel-pose frames per second of each person at each size, and of the whole
-                 scene at the input resolution, with peak memory (glimpse/replay/speed.py; 07_eval.speed)
+                 scene at the input resolution, with peak memory (glimpse/eval/speed.py; 07_eval.speed)
   speed.md       the same as Markdown tables
 """
 
@@ -31,18 +31,18 @@ from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.errors import GlimpseError  # noqa: E402
 from glimpse.eval.never_seen import PosedBodies, person_mean_colours  # noqa: E402
+from glimpse.eval.renders import write_render_set  # noqa: E402
 from glimpse.eval.score import METRICS_FORMAT, headline, score_views, write_tables  # noqa: E402
+from glimpse.eval.speed import SPEED_FORMAT, speed_markdown, speed_report  # noqa: E402
 from glimpse.eval.views import choose_views  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
 from glimpse.humans.load import load_trained_people  # noqa: E402
 from glimpse.humans.visibility import BodyVisibility  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
-from glimpse.lpips import LPIPS  # noqa: E402
+from glimpse.metrics.lpips import LPIPS  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.replay.finished import FinishedRun  # noqa: E402
-from glimpse.replay.speed import SPEED_FORMAT, speed_markdown, speed_report  # noqa: E402
-from glimpse.replay.standard import write_render_set  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "07_eval"

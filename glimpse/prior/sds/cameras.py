@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from glimpse.cameras.model import PinholeCamera
-from glimpse.prior.orbit import box_centre, orbit_camera
+from glimpse.cameras.orbit import box_centre, orbit_camera
 
 VIEW_KINDS = ("full", "canonical", "head", "upper", "lower")
 PLACEHOLDER_FOVY_DEG = 90.0  # a zoomed camera's pose comes from the orbit; its focal length is fitted after

@@ -1,6 +1,6 @@
 """The ControlNet's condition for an SDS view: the person's OpenPose-18 skeleton drawn from that camera.
 
-The same drawing as stage 05's crops (glimpse.crops.skeleton): the body's 18 keypoints (SMPL joints
+The same drawing as stage 05's crops (glimpse.prior.skeleton): the body's 18 keypoints (SMPL joints
 and face points, glimpse.body keypoint map) projected by the SDS camera; face points turned away
 from the camera and points behind it are left out (GTU_REFERENCE.md 4, "ControlNet condition").
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from glimpse.cameras.model import PinholeCamera
-from glimpse.crops.skeleton import draw_skeleton, hidden_face, shown_keypoints
+from glimpse.prior.skeleton import draw_skeleton, hidden_face, shown_keypoints
 
 
 def skeleton_image(keypoints: np.ndarray, head: np.ndarray, camera: PinholeCamera, size: int,

@@ -16,12 +16,12 @@ import cv2
 import numpy as np
 import torch
 
-from glimpse.crops.view import person_token
 from glimpse.io.images import read_rgb, rgb_to_uint8, write_png
 from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, decode_latents, encode_view_text, predicted_noise
 from glimpse.prior.sds.identity import IDENTITY_FORMAT, IdentitySwitch, PersonIdentity, new_identity, save_identity
 from glimpse.prior.sds.prompts import without_token
 from glimpse.prior.sds.train_identity import IdentityConfig, IdentityExample, SampleConfig, train_identity
+from glimpse.prior.views import person_token
 
 COLOUR_LEVELS = 255.0
 IDENTITY_FILE = "identity.safetensors"

@@ -33,16 +33,13 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from glimpse.background.stage import render_camera
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.skinning import canonical_to_posed
-from glimpse.cameras.model import PinholeCamera
-from glimpse.crops.skeleton import HEAD_JOINT
-from glimpse.crops.view import view_word
+from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.humans.person import PersonGaussians, joint_transforms
 from glimpse.io.images import rgb_to_uint8, write_png
-from glimpse.losses import hard_surface_loss
+from glimpse.metrics.losses import hard_surface_loss
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
 from glimpse.prior.sds.config import DiffusionConfig
@@ -53,6 +50,8 @@ from glimpse.prior.sds.load import load_diffusion
 from glimpse.prior.sds.person_identity import IDENTITY_FILE, unit_image
 from glimpse.prior.sds.prompts import view_prompts
 from glimpse.prior.sds.schedule import recon_weight, sample_timestep
+from glimpse.prior.skeleton import HEAD_JOINT
+from glimpse.prior.views import view_word
 from glimpse.render import rasterize
 
 PELVIS = 0
@@ -142,8 +141,7 @@ class SDSPrior(UnseenPrior):
         posed = person.posed_with(transforms, camera.centre, self.render.sh_degree)
         background = torch.as_tensor(rng.random(3), dtype=torch.float32, device=self.device)
         render = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
-                           colors=posed.colors, background=background, backend=self.render.backend,
-                           antialiased=self.render.antialiased)
+                           colors=posed.colors, background=background, settings=self.render)
         skeleton = self._skeleton(vertices, joints, view.camera, size)
         prompt_view = view_word(view.azimuth_deg, config.prompt.front_max_deg, config.prompt.back_min_deg)
         timestep = sample_timestep(sds_step, self.timesteps, self.models.train_timesteps, generator)

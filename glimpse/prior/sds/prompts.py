@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from glimpse.crops.view import person_token, view_prompt
+from glimpse.prior.views import person_token, view_prompt
 
 OPPOSITE_VIEW = {"front": "back", "back": "front"}
 

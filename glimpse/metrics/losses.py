@@ -1,6 +1,6 @@
 """Training losses: L1, MSE, D-SSIM, LPIPS and the hard-surface alpha regulariser.
 
-Shapes follow :mod:`glimpse.metrics`: images ``[..., H, W, 3]`` in [0, 1], masks
+Shapes follow :mod:`glimpse.metrics.image`: images ``[..., H, W, 3]`` in [0, 1], masks
 ``[..., H, W]`` (bool or float weights). Every loss returns a 0-d tensor, the mean over
 everything it covers; with a mask, the mean over the masked pixels of the whole batch (pixel
 losses, D-SSIM, hard surface; so an image weighs by its masked area) or over images with both
@@ -14,8 +14,8 @@ import math
 import torch
 from torch import Tensor
 
-from glimpse.lpips import LPIPS
-from glimpse.metrics import SSIM_RADIUS, ssim_map
+from glimpse.metrics.image import SSIM_RADIUS, ssim_map
+from glimpse.metrics.lpips import LPIPS
 
 # -log(exp(-a) + exp(a - 1)) is smallest at a = 0 and a = 1, where it equals -log(1 + e^-1);
 # adding log(1 + e^-1) = 0.31326... makes the minimum exactly 0 (LOLNeRF; the authors' code
@@ -45,7 +45,7 @@ def mse_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor
 
 
 def dssim_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
-    """``1 - SSIM`` (scikit-image protocol, see :func:`glimpse.metrics.ssim`), mean over images.
+    """``1 - SSIM`` (scikit-image protocol, see :func:`glimpse.metrics.image.ssim`), mean over images.
 
     Without a mask: 1 - mean of the SSIM map less its 5-pixel border (scikit-image's mean);
     with one: 1 - mean of the full map over the masked pixels. Images need H, W >= 11.

@@ -65,5 +65,4 @@ def render_frame(camera: Camera, gaussians: FrameGaussians, num_people: int, ren
     """Rasterize ``gaussians``; ``group_alpha[1 + k]`` is person k's alpha."""
     return rasterize(camera, means=gaussians.means, opacities=gaussians.opacities,
                      covariances=gaussians.covariances, colors=gaussians.colors, background=background_colour,
-                     groups=gaussians.groups, num_groups=1 + num_people, backend=render.backend,
-                     antialiased=render.antialiased)
+                     groups=gaussians.groups, num_groups=1 + num_people, settings=render)

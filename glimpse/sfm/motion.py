@@ -14,8 +14,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from glimpse.cameras.frames import grey
-from glimpse.cameras.person_regions import PersonRegions
+from glimpse.sfm.frames import grey
+from glimpse.sfm.person_regions import PersonRegions
 
 _MAX_CORNERS = 800
 _CORNER_QUALITY = 0.01

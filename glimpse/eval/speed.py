@@ -24,15 +24,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
 from glimpse.body.motion import BodySequence
 from glimpse.body.params import BodyParams
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import turn_cameras
 from glimpse.eval.config import SpeedConfig
+from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.images import rgb_to_uint8
-from glimpse.joint.compose import frame_gaussians, render_frame
-from glimpse.prior.orbit import turn_cameras
-from glimpse.render import rasterize
+from glimpse.render import RenderConfig, rasterize
 from glimpse.render.rasterize import choose_backend
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, upright
@@ -153,8 +153,8 @@ def driven_in_body_frame(person: PersonGaussians, motion: BodySequence) -> Perso
     return driven.to(person.pose_offsets.device).freeze()
 
 
-def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, config: SpeedConfig, sh_degree: int,
-                    backend: str, device: torch.device) -> SpeedTiming:
+def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, config: SpeedConfig,
+                    render: RenderConfig, device: torch.device) -> SpeedTiming:
     """Frames per second of ``person`` driven by ``motion`` at ``size``² pixels (see the module docstring)."""
     driven = driven_in_body_frame(person, motion)
     pelvis = driven.rig.rest_joints[0].cpu().double().numpy() + driven.transl.cpu().double().numpy()  # [T, 3]
@@ -164,11 +164,11 @@ def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, co
                turn_cameras(pelvis[np.arange(total) % len(motion)], config.radius_m, config.fovy_deg, size)]
 
     def pose(k: int):
-        return driven.posed(k % len(motion), cameras[k].centre, sh_degree)
+        return driven.posed(k % len(motion), cameras[k].centre, render.sh_degree)
 
     def draw(k: int, posed) -> int:
         rasterize(cameras[k], means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
-                  colors=posed.colors, background=white, backend=backend)
+                  colors=posed.colors, background=white, settings=render)
         return len(posed.means)
 
     return time_frames(config.frames, config.warmup_frames, pose, draw, device, size, size)
@@ -212,8 +212,7 @@ def speed_report(run: FinishedRun, config: SpeedConfig, device: torch.device,
     for person in run.people:
         timings = {}
         for size in config.sizes_px:
-            timings[str(size)] = time_novel_pose(person, motion, size, config, run.render.sh_degree, backend,
-                                                 device).as_dict()
+            timings[str(size)] = time_novel_pose(person, motion, size, config, run.render, device).as_dict()
             progress(f"speed: {person.pid} at {size}px: {timings[str(size)]['fps']:.1f} fps")
         people[person.pid] = {"gaussians": len(person.model), "model_mb": round(model_megabytes(person), 3),
                               "novel_pose": timings}

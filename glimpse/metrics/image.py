@@ -15,8 +15,8 @@ mean taken over the map with a ``(11 - 1) / 2 = 5`` pixel strip removed at every
 then over the channels. The masked variant averages the full map inside the mask instead
 (no border strip: the mask chooses the pixels).
 
-LPIPS lives in :mod:`glimpse.lpips`; losses in :mod:`glimpse.losses`; the table writer in
-:mod:`glimpse.metrics_table`.
+LPIPS lives in :mod:`glimpse.metrics.lpips`; losses in :mod:`glimpse.metrics.losses`; the table writer in
+:mod:`glimpse.metrics.table`.
 """
 
 from __future__ import annotations

@@ -18,20 +18,19 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from glimpse.background.stage import render_camera
-from glimpse.eval.config import RenderSetConfig
+from glimpse.cameras.model import render_camera
+from glimpse.cameras.orbit import box_centre, turn_cameras
 from glimpse.errors import GlimpseError
+from glimpse.eval.config import RenderSetConfig
 from glimpse.eval.views import ScoredView
-from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, rgb_to_uint8
 from glimpse.humans.person import PersonGaussians
+from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, rgb_to_uint8
 from glimpse.io.video import write_mp4
-from glimpse.prior.orbit import box_centre, turn_cameras
-from glimpse.render import rasterize
+from glimpse.render import RenderConfig, rasterize
 from glimpse.replay.cameras import Shot, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, people_centre, render_shot, render_video
-
 
 NEVER_SEEN_TINT = (255, 0, 255)  # magenta: the background no input frame showed, in removed_<pid>.mp4
 NEVER_SEEN_TINT_WEIGHT = 0.5
@@ -56,15 +55,15 @@ def side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
 
 
 @torch.no_grad()
-def canonical_turntable(person: PersonGaussians, sh_degree: int, frames: int, size: int, radius_m: float,
-                        fovy_deg: float, backend: str, device: torch.device) -> Iterator[np.ndarray]:
+def canonical_turntable(person: PersonGaussians, frames: int, size: int, radius_m: float,
+                        fovy_deg: float, render: RenderConfig, device: torch.device) -> Iterator[np.ndarray]:
     """[size, size, 3] uint8 renders of the person alone in canonical pose from ``frames`` azimuths evenly
     spread over a turn (0 = the front), elevation 0, ``radius_m`` from the body's centre, on white."""
     points = person.rig.canonical_vertices.cpu().numpy()
     centre = box_centre(points)
     for pinhole in turn_cameras(np.tile(centre, (frames, 1)), radius_m, fovy_deg, size):
-        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(sh_degree),
-                        background=torch.ones(3, device=device), backend=backend).rgb
+        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(render.sh_degree),
+                        background=torch.ones(3, device=device), settings=render).rgb
         yield rgb_to_uint8(rgb)
 
 
@@ -117,8 +116,8 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     written["freeze.mp4"] = f"time frozen at frame {frozen}, one turn around the people"
     for person in run.people:
         write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(
-            person, run.render.sh_degree, config.turntable_frames, config.turntable_size_px,
-            config.turntable_radius_m, config.turntable_fovy_deg, run.render.backend, device), fps)
+            person, config.turntable_frames, config.turntable_size_px,
+            config.turntable_radius_m, config.turntable_fovy_deg, run.render, device), fps)
         written[f"person_{person.pid}.mp4"] = f"{person.pid} alone, canonical pose, one turn"
     chosen = run.people[0].pid if config.person == "first" else config.person
     if chosen not in {p.pid for p in run.people}:

@@ -18,10 +18,10 @@ import numpy as np
 import pycolmap
 
 from glimpse.cameras.model import PinholeCamera
-from glimpse.cameras.person_regions import PersonRegions
 from glimpse.errors import GlimpseError
 from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
 from glimpse.io.images import parse_frame_name, write_png
+from glimpse.sfm.person_regions import PersonRegions
 
 log = logging.getLogger("glimpse")
 

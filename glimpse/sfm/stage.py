@@ -16,16 +16,16 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.cameras.align import align_cameras
-from glimpse.cameras.config import CamerasConfig
-from glimpse.cameras.frames import select_frame_ids, write_frames
 from glimpse.cameras.model import PinholeCamera, default_intrinsics
-from glimpse.cameras.motion import measure_camera_motion
-from glimpse.cameras.person_regions import PersonRegions, find_person_regions
-from glimpse.cameras.sfm import SfmOptions, run_sfm, triangulate_known_poses
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name
 from glimpse.scene import Scene
+from glimpse.sfm.colmap import SfmOptions, run_sfm, triangulate_known_poses
+from glimpse.sfm.config import CamerasConfig
+from glimpse.sfm.frames import select_frame_ids, write_frames
+from glimpse.sfm.motion import measure_camera_motion
+from glimpse.sfm.person_regions import find_person_regions
 
 log = logging.getLogger("glimpse")
 

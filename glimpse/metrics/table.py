@@ -16,8 +16,8 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from glimpse.lpips import LPIPS, LPIPS_REPORT_SCALE, LpipsNet
-from glimpse.metrics import DATA_RANGE, SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WIN_SIZE, psnr, ssim
+from glimpse.metrics.image import DATA_RANGE, SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WIN_SIZE, psnr, ssim
+from glimpse.metrics.lpips import LPIPS, LPIPS_REPORT_SCALE, LpipsNet
 
 TABLE_FORMAT = "glimpse-metrics/1"
 PSNR_DEFINITION = (
