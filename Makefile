@@ -1,5 +1,6 @@
 # Glimpse: `make demo`, `make all SCENE=dir`, `make <stage> SCENE=dir`, `make test`, `make bench`.
-# Set-up (the virtual environment) lives here; the stage DAG lives in mk/pipeline.mk.
+# Set-up (the virtual environment) lives here; the stage rules live in mk/pipeline.mk, and the DAG they follow
+# is declared once, in glimpse/pipeline/stages.py (`glimpse prepare` writes it for make).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
@@ -25,7 +26,8 @@ ifneq ($(PIPELINE_YAML),)
 export GLIMPSE_PIPELINE_YAML := $(abspath $(PIPELINE_YAML))
 endif
 
-STAGES := 01_sfm 02_smpl_fit 03_masks 04_bg_pretrain 05_textual_inversion 06_joint_opt 07_eval
+# The stages are the folders of stages/ (a test checks they are the registry's).
+STAGES := $(sort $(patsubst stages/%/run.py,%,$(wildcard stages/*/run.py)))
 PIPELINE := $(MAKE) --no-print-directory -f mk/pipeline.mk PY=$(abspath $(PY)) OUT=$(OUT) STAGES_DIR=$(STAGES_DIR)
 
 .PHONY: help venv all validate test bench demo clean-stage print-dag free-body $(STAGES)
@@ -74,8 +76,8 @@ clean-stage: venv
 	@run=$$($(PY) -m glimpse run-dir --scene "$(SCENE)" --out "$(OUT)") && \
 	  rm -rf "$$run/$(STAGE)" "$$run/.work/$(STAGE)" && echo "removed $$run/$(STAGE)"
 
-print-dag:
-	@$(PIPELINE) print-dag
+print-dag: venv
+	@$(PY) -m glimpse.pipeline.stages
 
 test: $(VENV)/.installed-test
 	$(VENV)/bin/lint-imports --no-cache

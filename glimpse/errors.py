@@ -41,7 +41,3 @@ class SceneError(GlimpseError):
 
 class ConfigError(GlimpseError):
     """A parameter is unknown, mistyped or out of range."""
-
-
-class NotImplementedStageError(GlimpseError):
-    """A pipeline stage whose issue has not landed yet."""

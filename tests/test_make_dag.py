@@ -18,6 +18,7 @@ import pytest
 import yaml
 from PIL import Image
 
+from glimpse.pipeline.prepare import prepare_run
 from glimpse.pipeline.stages import STAGES, STAGE_NAMES
 
 REPO = Path(__file__).resolve().parent.parent
@@ -76,10 +77,21 @@ def ran(log: Path, since: int) -> list[str]:
     return log.read_text().split()[since:]
 
 
-def test_dag_matches_the_stage_registry():
-    out = subprocess.run(["make", "-s", "-C", str(REPO), "print-dag"], capture_output=True, text=True, check=True).stdout
-    dag = {line.split(":")[0]: tuple(line.split(":")[1].split()) for line in out.strip().splitlines()}
+def test_the_stage_folders_are_the_registry_and_make_follows_its_dag(setup):
+    assert sorted(p.parent.name for p in (REPO / "stages").glob("*/run.py")) == sorted(STAGE_NAMES)
+    scene, out, log, env, args = setup
+    run = prepare_run(scene, out)
+    dag = {}
+    for line in run.dag_file.read_text().splitlines():
+        if line.startswith("DEPS_"):
+            name, _, upstream = line.removeprefix("DEPS_").partition(":=")
+            dag[name.strip()] = tuple(upstream.split())
     assert dag == {s.name: s.upstream for s in STAGES}
+    dry = subprocess.run(["make", "-n", "-C", str(REPO), "-f", "mk/pipeline.mk", f"RUN={run.root}", f"SCENE={scene}",
+                          f"OUT={out}", "PY=python", "all"], capture_output=True, text=True)  # what make would run
+    assert dry.returncode == 0, dry.stderr
+    commands = [line for line in dry.stdout.splitlines() if "/run.py" in line]
+    assert [c.split("/run.py")[0].rsplit("/", 1)[1] for c in commands] == list(STAGE_NAMES)
 
 
 def test_reruns_exactly_the_changed_stage_and_its_descendants(setup):

@@ -1,7 +1,7 @@
 """Before any stage runs: validate the scene, resolve parameters, and write the
 per-stage files the Makefile depends on.
 
-For each stage, under ``OUT/<scene>/``:
+Under ``OUT/<scene>/``: ``.dag.mk``, the stage DAG as make variables; and for each stage:
   ``.params/<stage>.json``  its resolved parameters (own section + shared sections it reads)
   ``.inputs/<stage>.json``  content hashes of the scene files it reads
 Both are rewritten only when their content changes, so make reruns exactly the
@@ -23,7 +23,7 @@ import yaml
 from glimpse.body.config import BodyConfig, check_scene_body_model
 from glimpse.config import Params, config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params
 from glimpse.errors import SceneError
-from glimpse.pipeline.stages import STAGES, StageSpec
+from glimpse.pipeline.stages import STAGES, StageSpec, dag_makefile
 
 PARAMS_FORMAT = "glimpse-params/1"
 INPUTS_FORMAT = "glimpse-inputs/1"
@@ -48,6 +48,11 @@ class RunPaths:
 
     def inputs_file(self, stage: str) -> Path:
         return self.root / ".inputs" / f"{stage}.json"
+
+    @property
+    def dag_file(self) -> Path:
+        """The stage DAG as make variables, included by mk/pipeline.mk."""
+        return self.root / ".dag.mk"
 
     def work_dir(self, stage: str) -> Path:
         return self.root / ".work" / stage
@@ -196,6 +201,7 @@ def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> RunPa
         check_scene_body_model(scene_yaml.get("body_model", "free"), body, str(scene_root / "scene.yaml"))
     run = RunPaths(Path(out_root) / scene_name(scene_root))
     hashes = HashCache(run.cache_dir / "hashes.json")
+    write_if_changed(run.dag_file, dag_makefile())
     for spec in STAGES:
         write_if_changed(
             run.params_file(spec.name),

@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterator
 
 from glimpse import __version__
 from glimpse.config import config_from_mapping
-from glimpse.errors import GlimpseError, NotImplementedStageError
+from glimpse.errors import GlimpseError
 from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, prepare_run
 from glimpse.pipeline.stages import STAGE_NAMES, stage_spec
 
@@ -171,10 +171,9 @@ def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, bod
     return run.stage_dir(stage)
 
 
-def stage_main(stage: str, body: Callable[[StageContext], None] | None, description: str) -> None:
+def stage_main(stage: str, body: Callable[[StageContext], None], description: str) -> None:
     """Command-line entry point of ``stages/<stage>/run.py``.
 
-    ``body`` None means the stage's issue has not landed: a clear error, no output.
     Bad input exits with status 2 and one message; bugs keep their traceback.
     """
     parser = argparse.ArgumentParser(prog=f"stages/{stage}/run.py", description=description)
@@ -187,13 +186,6 @@ def stage_main(stage: str, body: Callable[[StageContext], None] | None, descript
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(message)s")
     try:
-        if body is None:
-            run = prepare_run(args.scene, args.out, args.params)
-            done = [name for name in STAGE_NAMES if run.manifest(name).is_file()]
-            raise NotImplementedStageError(
-                f"stage {stage} is not implemented yet (it arrives with issue {stage_spec(stage).issue}); "
-                f"the pipeline stops here. Finished stages ({', '.join(done) or 'none'}) are in {run.root}/"
-            )
         final = run_stage(stage, args.scene, args.out, args.params, body)
     except GlimpseError as exc:
         print(f"error: {exc}", file=sys.stderr)

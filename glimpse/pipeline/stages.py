@@ -1,6 +1,6 @@
 """The stage registry: what each stage reads (upstream stages, scene files, shared
-parameter sections) and which issue brings it. The Makefile's DAG mirrors
-``upstream`` (``make print-dag`` prints it; a test checks they agree).
+parameter sections). It is the pipeline's one declaration of the DAG: ``glimpse
+prepare`` writes make's prerequisites from ``upstream`` (``make print-dag`` prints them).
 """
 
 from __future__ import annotations
@@ -17,18 +17,12 @@ class StageSpec:
     shared:        shared pipeline.yaml sections the stage reads (recorded in its .params file).
     scene_inputs:  glob patterns, relative to the scene root, of the scene files it reads;
                    ``scene.yaml`` means the file without its ``overrides`` (those are parameters).
-    issue:         where the stage is built, for the "not implemented yet" message (None = built).
     """
 
     name: str
     upstream: tuple[str, ...]
     shared: tuple[str, ...]
     scene_inputs: tuple[str, ...]
-    issue: str | None = None
-
-    @property
-    def implemented(self) -> bool:
-        return self.issue is None
 
 
 _PERSON_2D = ("humans/*/masks/*.png", "humans/*/keypoints2d.npz")
@@ -83,9 +77,22 @@ STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_surface", "diffusion")
 
 
+def dag_makefile(stages: tuple[StageSpec, ...] = STAGES) -> str:
+    """The DAG as make variables (``STAGES``, ``DEPS_<stage>``), for mk/pipeline.mk to include."""
+    lines = ["# Written by `glimpse prepare` from glimpse/pipeline/stages.py, the DAG's one declaration.",
+             f"STAGES := {' '.join(spec.name for spec in stages)}"]
+    lines += [f"DEPS_{spec.name} := {' '.join(spec.upstream)}".rstrip() for spec in stages]
+    return "\n".join(lines) + "\n"
+
+
 def stage_spec(name: str) -> StageSpec:
     """Look a stage up by name; unknown names list the known ones."""
     for spec in STAGES:
         if spec.name == name:
             return spec
     raise ValueError(f"unknown stage {name!r}; known stages: {', '.join(STAGE_NAMES)}")
+
+
+if __name__ == "__main__":  # `make print-dag`
+    for spec in STAGES:
+        print(f"{spec.name}: {' '.join(spec.upstream)}")
