@@ -111,7 +111,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             stage_spec(args.stage)
         except ValueError as exc:
             raise GlimpseError(str(exc)) from None
-    run = prepare_run(args.scene, args.out, args.params)
+    run, _ = prepare_run(args.scene, args.out, args.params)
     if args.command == "prepare":
         print(run.root)
     else:

@@ -201,3 +201,53 @@ def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) ->
 def config_to_mapping(config: Any) -> dict[str, Any]:
     """The inverse of config_from_mapping (for manifests and .params files)."""
     return dataclasses.asdict(config)
+
+
+# --------------------------------------------------------------------------- which keys a stage reads
+
+_READ_LOG = "_glimpse_read_log"  # instance attribute of a tracking copy: (dotted prefix, the set it adds to)
+_TRACKING_CLASSES: dict[type, type] = {}
+
+
+def _tracking_class(cls: type) -> type:
+    """A subclass of the config dataclass ``cls`` whose field reads are logged (one class per ``cls``)."""
+    if cls not in _TRACKING_CLASSES:
+        names = frozenset(f.name for f in dataclasses.fields(cls))
+
+        def __getattribute__(self, name: str) -> Any:
+            value = object.__getattribute__(self, name)
+            if name in names and not dataclasses.is_dataclass(value):
+                try:
+                    prefix, reads = object.__getattribute__(self, _READ_LOG)
+                except AttributeError:  # a copy made by dataclasses.replace: not tracked
+                    return value
+                reads.add(f"{prefix}.{name}")
+            return value
+
+        _TRACKING_CLASSES[cls] = type(cls.__name__, (cls,), {"__getattribute__": __getattribute__,
+                                                             "__qualname__": cls.__qualname__})
+    return _TRACKING_CLASSES[cls]
+
+
+def tracking_reads(config: T, prefix: str, reads: set[str]) -> T:
+    """A copy of the config dataclass ``config`` that adds ``prefix.<field>`` (dotted through nested configs) to
+    ``reads`` whenever one of its values is read. The runner hands a stage its shared sections this way and
+    checks afterwards that the stage declared every key it read (glimpse/pipeline/stages.py). Building the copy
+    (whose checks in ``__post_init__`` read every field again) logs nothing."""
+    copy = _untracked_copy(config)
+    _start_logging(copy, prefix, reads)
+    return copy
+
+
+def _untracked_copy(config: Any) -> Any:
+    values = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    values = {name: _untracked_copy(v) if dataclasses.is_dataclass(v) else v for name, v in values.items()}
+    return _tracking_class(type(config))(**values)
+
+
+def _start_logging(copy: Any, prefix: str, reads: set[str]) -> None:
+    for f in dataclasses.fields(copy):
+        value = object.__getattribute__(copy, f.name)
+        if dataclasses.is_dataclass(value):
+            _start_logging(value, f"{prefix}.{f.name}", reads)
+    object.__setattr__(copy, _READ_LOG, (prefix, reads))

@@ -30,12 +30,29 @@ def test_every_parameter_line_has_a_comment():
             assert "#" in line, f"pipeline.yaml line {number} has no comment: {line!r}"
 
 
-def test_shared_sections_exist():
+def test_every_key_a_stage_declares_it_reads_is_a_shared_parameter():
     defaults = load_pipeline_yaml()
     for name in SHARED_SECTIONS:
         assert name in defaults
     for spec in STAGES:
-        assert set(spec.shared) <= set(SHARED_SECTIONS)
+        for key in spec.reads:
+            section, *path = key.split(".")
+            assert section in SHARED_SECTIONS, (spec.name, key)
+            node = defaults[section]
+            for part in path:
+                assert isinstance(node, dict) and part in node, (spec.name, key)
+                node = node[part]
+
+
+def test_every_prior_owns_a_section_that_stage_06_declares():
+    from glimpse.pipeline.sections import SECTION_CONFIGS
+    from glimpse.prior import PRIORS
+
+    joint = next(spec for spec in STAGES if spec.name == "06_joint_opt")
+    for prior in PRIORS.values():
+        if prior.section is not None:
+            assert SECTION_CONFIGS[prior.section] is prior.config_class
+            assert prior.section in SHARED_SECTIONS and joint.declares(prior.section), prior.name
 
 
 def test_cli_params_are_parsed_as_yaml():

@@ -337,7 +337,7 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
         background = GaussianModel.from_points(torch.tensor([[0.0, 0.0, 10.0]]), torch.full((1, 3), 0.3),
                                                torch.tensor([5.0]), 0.5, 1)
         prior = make_prior("surface", PriorContext([person], visibility, body_model, RENDER, 0, config.scaled),
-                           {"surface": surface})
+                           surface)
         return JointTrainer(background, [person], views, config, RENDER, prior, None, 0,
                             tmp_path / "checkpoint.pt", "key")
 

@@ -80,7 +80,7 @@ def ran(log: Path, since: int) -> list[str]:
 def test_the_stage_folders_are_the_registry_and_make_follows_its_dag(setup):
     assert sorted(p.parent.name for p in (REPO / "stages").glob("*/run.py")) == sorted(STAGE_NAMES)
     scene, out, log, env, args = setup
-    run = prepare_run(scene, out)
+    run, _ = prepare_run(scene, out)
     dag = {}
     for line in run.dag_file.read_text().splitlines():
         if line.startswith("DEPS_"):
@@ -118,33 +118,62 @@ def test_reruns_exactly_the_changed_stage_and_its_descendants(setup):
     assert sorted(ran(log, n)) == ["04_bg_pretrain", "06_joint_opt", "07_eval"]
     assert json.loads((out / "tiny" / "04_bg_pretrain" / "params.json").read_text())["04_bg_pretrain"]["knob"] == 2
 
-    n = len(ran(log, 0))  # a shared section reaches every stage that reads it
-    make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
+    n = len(ran(log, 0))  # a shared key reaches exactly the stages that declare it
+    make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32")
+    assert sorted(ran(log, n)) == ["06_joint_opt", "07_eval"]
+    n = len(ran(log, 0))
+    make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1")
+    assert sorted(ran(log, n)) == ["04_bg_pretrain", "06_joint_opt", "07_eval"]
+    params = json.loads((out / "tiny" / "07_eval" / "params.json").read_text())
+    assert params["body"] == {"model_path": "glimpse/body/assets/free_body.npz"}  # what stage 07 reads of body
+    n = len(ran(log, 0))
+    make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1 "
+                    "compute.seed=5")
     assert sorted(ran(log, n)) == sorted(STAGE_NAMES)
 
     n = len(ran(log, 0))  # scene.yaml overrides are parameters too; other scene.yaml edits are inputs
     config = yaml.safe_load((scene / "scene.yaml").read_text())
     config["overrides"] = {"05_textual_inversion": {"knob": 7}}
     (scene / "scene.yaml").write_text(yaml.safe_dump(config))
-    make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
+    make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1 "
+                    "compute.seed=5")
     assert sorted(ran(log, n)) == ["05_textual_inversion", "06_joint_opt", "07_eval"]
+    kept = "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1 compute.seed=5"
 
     n = len(ran(log, 0))  # clean-stage removes one output; make all rebuilds it and its descendants
     cleaned = make(args, env, "STAGE=05_textual_inversion", target="clean-stage")
     assert cleaned.returncode == 0 and not (out / "tiny" / "05_textual_inversion").exists()
     assert (out / "tiny" / "04_bg_pretrain" / "manifest.json").exists()
-    make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
+    make(args, env, kept)
     assert sorted(ran(log, n)) == ["05_textual_inversion", "06_joint_opt", "07_eval"]
 
     n = len(ran(log, 0))  # one stage on request; its descendants wait for `make all`
-    single = make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5", target="03_masks")
+    single = make(args, env, kept, target="03_masks")
     assert single.returncode == 0, single.stderr
     assert ran(log, n) == ["03_masks"]
 
     n = len(ran(log, 0))  # a changed scene file reruns the stages that read it
     Image.fromarray(np.zeros((12, 16, 3), np.uint8)).save(scene / "frames" / "000001.png")
-    make(args, env, "PARAMS=04_bg_pretrain.knob=2 compute.seed=5")
+    make(args, env, kept)
     assert ran(log, n)[0] == "01_sfm" and sorted(ran(log, n)) == sorted(STAGE_NAMES)
+
+
+def test_a_stage_that_reads_a_shared_key_it_does_not_declare_is_not_published(setup, monkeypatch):
+    from glimpse.pipeline import runner
+
+    scene, out, log, env, args = setup
+    monkeypatch.setenv("GLIMPSE_PIPELINE_YAML", str(out.parent / "pipeline.yaml"))
+
+    def body(ctx) -> None:  # stage 01 declares compute.seed and compute.threads, nothing of body
+        ctx.section("compute").seed
+        ctx.section("body").skinning.knn
+
+    with pytest.raises(RuntimeError, match=r"stage 01_sfm read body\.skinning\.knn, which"):
+        runner.run_stage("01_sfm", scene, out, "", body)
+    assert not (out / "tiny" / "01_sfm").exists()
+    runner.run_stage("01_sfm", scene, out, "", lambda ctx: ctx.section("compute").seed)
+    manifest = json.loads((out / "tiny" / "01_sfm" / "manifest.json").read_text())
+    assert manifest["params"]["compute"] == {"seed": 0, "threads": 2} and set(manifest["params"]) == {"01_sfm", "compute"}
 
 
 def test_a_killed_stage_leaves_the_previous_output(setup):

@@ -251,7 +251,7 @@ def _prior_and_person(body_model, config: SurfacePriorConfig = SURFACE, views: i
     visibility = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)
     config = replace(config, start_at=1, refresh_every=1000, views_per_person=views)
     prior = make_prior("surface", PriorContext([person], visibility, body_model, RENDER, 0, lambda i: i),
-                       {"surface": config})
+                       config)
     return prior, person, visibility["p0"].seen
 
 
@@ -311,12 +311,12 @@ def test_no_term_before_start_at_and_the_state_round_trips(body_model):
     _, person, _ = _prior_and_person(body_model)
     late = make_prior("surface", PriorContext([person], {"p0": BodyVisibility.empty(body_model.num_vertices)},
                                               body_model, RENDER, 0, lambda i: i),
-                      {"surface": replace(SURFACE, start_at=5, views_per_person=1)})
+                      replace(SURFACE, start_at=5, views_per_person=1))
     assert late.losses(4, [person]) == {} and late.losses(5, [person])
     state = late.state_dict()
     other = make_prior("surface", PriorContext([person], {"p0": BodyVisibility.empty(body_model.num_vertices)},
                                                body_model, RENDER, 0, lambda i: i),
-                       {"surface": replace(SURFACE, start_at=5, views_per_person=1)})
+                       replace(SURFACE, start_at=5, views_per_person=1))
     other.load_state_dict(state)
     assert torch.equal(other.people["p0"].vertex_colours, late.people["p0"].vertex_colours)
     assert other.people["p0"].coloured_at == 5 and math.isfinite(float(other.losses(6, [person])["loss_prior_needle"].detach()))

@@ -379,7 +379,7 @@ def _sds_prior(tmp_path, body_model, combine: str = "separate_steps", preview_di
     visibility = {p.pid: BodyVisibility.empty(body_model.num_vertices) for p in people}
     context = PriorContext(people, visibility, body_model, RenderConfig("auto", 1, False), 0, lambda i: i,
                            tmp_path / "05", preview_dir)
-    return make_prior("sds", context, {"sds": config}), people
+    return make_prior("sds", context, config), people
 
 
 def test_an_sds_step_reaches_only_the_guided_persons_gaussians(tmp_path):

@@ -112,9 +112,9 @@ def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, b
 
 
 def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, body: BodyConfig,
-                body_model: BodyModel, prior_kind: str, prior_settings: dict, seed: int, device: torch.device,
+                body_model: BodyModel, prior_kind: str, prior_config: object | None, seed: int, device: torch.device,
                 work: Path, key: str, out: Path, identity_dir: Path | None = None) -> JointResult:
-    """Train with the prior ``prior_kind`` (its pipeline.yaml section in ``prior_settings``; ``identity_dir``
+    """Train with the prior ``prior_kind`` (built with ``prior_config``, its section's typed config; ``identity_dir``
     stage 05's outputs), then render every input view (``out/renders/joint.mp4``) and build the report; the sds
     prior writes its previews, when asked, to ``out/sds_previews/``."""
     torch.manual_seed(seed)
@@ -123,7 +123,7 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     visibility = body_visibility(body_model, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
                                  inputs.height, person_masks(inputs, [p.pid for p in people]), config.visibility)
     prior = make_prior(prior_kind, PriorContext(people, visibility, body_model, render, seed, config.scaled,
-                                                identity_dir, out / PREVIEWS_DIR), prior_settings)
+                                                identity_dir, out / PREVIEWS_DIR), prior_config)
     initial_counts = {p.pid: len(p.model) for p in people}
     background = inputs.background.to(device)
     lpips_module = LPIPS(config.loss.lpips_net).to(device) if config.loss.lpips > 0 else None

@@ -170,10 +170,20 @@ def scene_input_hashes(scene_root: Path, spec: StageSpec, hashes: HashCache) -> 
 
 
 def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
-    """The parameters one stage reads: its own section plus the shared ones."""
-    sections = {name: params[name] for name in spec.shared}
-    sections[spec.name] = params.get(spec.name, {})
-    return sections
+    """The parameters one stage reads: its own section whole, and of the shared sections only the keys it
+    declares (nested as in pipeline.yaml)."""
+    recorded: dict[str, Any] = {}
+    for key in spec.reads:
+        section, *path = key.split(".")
+        source, target = params[section], recorded.setdefault(section, {})
+        for part in path[:-1]:
+            source, target = source[part], target.setdefault(part, {})
+        if path:
+            target[path[-1]] = source[path[-1]]
+        else:
+            recorded[section] = params[section]
+    recorded[spec.name] = params.get(spec.name, {})
+    return recorded
 
 
 def scene_name(scene_root: Path) -> str:
@@ -181,11 +191,11 @@ def scene_name(scene_root: Path) -> str:
     return str(yaml.safe_load((scene_root / "scene.yaml").read_text())["name"])
 
 
-def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> RunPaths:
-    """Validate, resolve and write the .params/.inputs files of every stage.
+def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> tuple[RunPaths, Params]:
+    """Validate, resolve and write the .dag.mk and the .params/.inputs files of every stage.
 
-    Returns the run's paths. Raises SceneError or ConfigError on bad input, before
-    anything under ``out_root`` is touched except the validation cache.
+    Returns the run's paths and every resolved parameter. Raises SceneError or ConfigError on bad
+    input, before anything under ``out_root`` is touched except the validation cache.
     """
     scene_root = Path(scene_root)
     if not (scene_root / "scene.yaml").is_file():
@@ -219,4 +229,4 @@ def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> RunPa
             ),
         )
     hashes.save()
-    return run
+    return run, params

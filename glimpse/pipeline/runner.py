@@ -24,10 +24,10 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from glimpse import __version__
-from glimpse.config import config_from_mapping
+from glimpse.config import config_from_mapping, tracking_reads
 from glimpse.errors import GlimpseError
 from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, prepare_run
-from glimpse.pipeline.stages import STAGE_NAMES, stage_spec
+from glimpse.pipeline.stages import STAGE_NAMES, StageSpec, stage_spec
 
 MANIFEST_FORMAT = "glimpse-manifest/1"
 log = logging.getLogger("glimpse")
@@ -39,7 +39,10 @@ class StageContext:
 
     out:       the temporary output folder to write into (becomes OUT/<scene>/<stage>/).
     work:      OUT/<scene>/.work/<stage>/ for checkpoints that survive a crash.
-    params:    resolved parameters: own section under the stage name, plus shared sections.
+    params:    what the output depends on: the stage's own section, and the shared keys it declares
+               (its .params file; recorded in the manifest, and what checkpoints are keyed on).
+    resolved:  every resolved section, from which ``section`` builds the typed configs.
+    reads:     the dotted shared keys the stage has read so far (``section`` logs them).
     formats:   file (relative to ``out``) -> format version; recorded in the manifest.
     timings:   named durations in seconds; recorded in the manifest.
     summary:   small facts for the manifest (mode chosen, counts, errors).
@@ -51,16 +54,20 @@ class StageContext:
     out: Path
     work: Path
     params: dict[str, Any]
+    resolved: dict[str, Any]
+    reads: set[str] = field(default_factory=set)
     formats: dict[str, str] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
 
     def section(self, name: str) -> Any:
         """pipeline.yaml section ``name`` (this stage's own or a shared one) as its typed config
-        (the class glimpse.pipeline.sections registers for it), built strictly."""
+        (the class glimpse.pipeline.sections registers for it), built strictly. A shared section logs
+        every key read from it in ``reads``."""
         from glimpse.pipeline.sections import SECTION_CONFIGS
 
-        return config_from_mapping(SECTION_CONFIGS[name], self.params[name], f"pipeline.yaml {name}")
+        config = config_from_mapping(SECTION_CONFIGS[name], self.resolved[name], f"pipeline.yaml {name}")
+        return config if name == self.stage else tracking_reads(config, name, self.reads)
 
     def upstream_dir(self, stage: str) -> Path:
         """The published output folder of an upstream stage."""
@@ -140,10 +147,20 @@ def _manifest(ctx: StageContext, started: float, upstream: list[str]) -> dict[st
     }
 
 
+def _check_reads(spec: StageSpec, reads: set[str]) -> None:
+    """A stage that read a shared key it does not declare would not rerun when that key changes: refuse to
+    publish it (a bug in glimpse/pipeline/stages.py, not in the user's input)."""
+    undeclared = sorted(key for key in reads if not spec.declares(key))
+    if undeclared:
+        raise RuntimeError(f"stage {spec.name} read {', '.join(undeclared)}, which its entry in "
+                           f"glimpse/pipeline/stages.py does not declare (reads: {', '.join(spec.reads)}); "
+                           f"a change to them would not rerun it: declare them there")
+
+
 def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]) -> Path:
     """Prepare, run ``body`` in a temporary folder, publish; return the output folder."""
     spec = stage_spec(stage)
-    run = prepare_run(scene_root, out_root, cli_params)
+    run, resolved = prepare_run(scene_root, out_root, cli_params)
     params_doc = json.loads(run.params_file(stage).read_text())
     if params_doc.get("format") != PARAMS_FORMAT:
         raise GlimpseError(f"{run.params_file(stage)}: unknown format {params_doc.get('format')!r}; expected {PARAMS_FORMAT}")
@@ -157,11 +174,13 @@ def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, bod
     tmp = tmp_root / f"{stage}-{os.getpid()}"
     tmp.mkdir()
     ctx = StageContext(
-        stage=stage, scene_root=Path(scene_root), run=run, out=tmp, work=run.work_dir(stage), params=params_doc["params"]
+        stage=stage, scene_root=Path(scene_root), run=run, out=tmp, work=run.work_dir(stage), params=params_doc["params"],
+        resolved=resolved,
     )
     started = time.time()
     try:
         body(ctx)
+        _check_reads(spec, ctx.reads)
         manifest = _manifest(ctx, started, list(spec.upstream))
         (tmp / "manifest.json").write_text(canonical_json(manifest))
         publish(tmp, run.stage_dir(stage))

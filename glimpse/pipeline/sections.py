@@ -1,5 +1,6 @@
 """Which config dataclass owns each pipeline.yaml section (tests check both ways:
-every field has an entry, every entry a field)."""
+every field has an entry, every entry a field). The priors' sections come from the prior
+registry (glimpse/prior/__init__.py), each prior naming its own."""
 
 from __future__ import annotations
 
@@ -11,8 +12,8 @@ from glimpse.eval.config import EvalConfig
 from glimpse.fit.config import FitConfig
 from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
-from glimpse.prior.config import PriorConfig, SurfacePriorConfig
-from glimpse.prior.sds.config import DiffusionConfig
+from glimpse.prior import prior_sections
+from glimpse.prior.config import PriorConfig
 from glimpse.render.config import RenderConfig
 from glimpse.sfm.config import CamerasConfig
 
@@ -21,8 +22,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "body": BodyConfig,
     "render": RenderConfig,
     "prior": PriorConfig,
-    "prior_surface": SurfacePriorConfig,
-    "diffusion": DiffusionConfig,
+    **prior_sections(),
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,

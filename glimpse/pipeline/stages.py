@@ -14,15 +14,22 @@ class StageSpec:
 
     name:          folder name under ``stages/`` and under ``OUT/<scene>/``.
     upstream:      stages whose outputs this one reads (their manifests are make prerequisites).
-    shared:        shared pipeline.yaml sections the stage reads (recorded in its .params file).
+    reads:         the keys of shared pipeline.yaml sections the stage reads, dotted (``body.skinning``
+                   stands for every key under it). Only these, and the stage's own section, go into
+                   its .params file, so a change reruns exactly the stages that read it; the runner
+                   refuses to publish a stage that read a shared key it does not declare.
     scene_inputs:  glob patterns, relative to the scene root, of the scene files it reads;
                    ``scene.yaml`` means the file without its ``overrides`` (those are parameters).
     """
 
     name: str
     upstream: tuple[str, ...]
-    shared: tuple[str, ...]
+    reads: tuple[str, ...]
     scene_inputs: tuple[str, ...]
+
+    def declares(self, key: str) -> bool:
+        """Whether the dotted shared ``key`` is among (or under) what the stage declares it reads."""
+        return any(key == declared or key.startswith(declared + ".") for declared in self.reads)
 
 
 _PERSON_2D = ("humans/*/masks/*.png", "humans/*/keypoints2d.npz")
@@ -32,43 +39,43 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "01_sfm",
         upstream=(),
-        shared=("compute",),
+        reads=("compute.seed", "compute.threads"),
         scene_inputs=("scene.yaml", "frames/*", "video.mp4", "cameras.json", *_PERSON_2D, *_PERSON_3D),
     ),
     StageSpec(
         "02_smpl_fit",
         upstream=("01_sfm",),
-        shared=("compute", "body"),
+        reads=("compute.seed", "compute.threads", "body.model_path"),
         scene_inputs=("scene.yaml", *_PERSON_2D, *_PERSON_3D),
     ),
     StageSpec(
         "03_masks",
         upstream=("01_sfm", "02_smpl_fit"),
-        shared=("compute", "body"),
+        reads=("compute.seed", "compute.threads", "body.model_path"),
         scene_inputs=("humans/*/masks/*.png",),
     ),
     StageSpec(
         "04_bg_pretrain",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute", "render"),
+        reads=("compute", "render"),
         scene_inputs=(),
     ),
     StageSpec(
         "05_textual_inversion",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        shared=("compute", "body", "prior", "diffusion"),
+        reads=("compute", "body.model_path", "prior.kind", "diffusion"),
         scene_inputs=("humans/*/reference/*",),
     ),
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        shared=("compute", "body", "render", "prior", "prior_surface", "diffusion"),
+        reads=("compute", "body", "render", "prior.kind", "prior_surface", "diffusion"),
         scene_inputs=(),
     ),
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "06_joint_opt"),
-        shared=("compute", "body", "render"),
+        reads=("compute", "body.model_path", "render"),
         scene_inputs=("eval/**/*",),
     ),
 )

@@ -1,13 +1,12 @@
 """Priors over the unseen parts of people, registered by name (pipeline.yaml ``prior.kind``).
 
-Registered here by explicit import; ``make_prior`` builds one with its own pipeline.yaml section
-(``prior_<name>``, when it has one), ``resolve_prior_kind`` turns ``auto`` into a concrete kind
-(CONTRACTS.md "Default prior").
+Registered here by explicit import, one line each in ``PRIORS``; each prior class names its own
+pipeline.yaml section and config class (``section``, ``config_class``), which the pipeline's section table
+takes from here. ``make_prior`` builds one with its config, ``resolve_prior_kind`` turns ``auto`` into a
+concrete kind (CONTRACTS.md "Default prior").
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 from glimpse.errors import ConfigError
 from glimpse.prior.base import PriorContext, UnseenPrior
@@ -36,11 +35,16 @@ def check_prior_kind(kind: str, diffusion_ready: bool = False) -> str:
                       f"{', '.join(PRIORS)} (or auto)")
 
 
-def make_prior(kind: str, context: PriorContext, settings: dict[str, Any]) -> UnseenPrior:
-    """The prior registered under the resolved ``kind``, built with ``settings[name]`` (its pipeline.yaml
-    section; None when it has none)."""
-    name = check_prior_kind(kind)
-    return PRIORS[name](context, settings.get(name))
+def prior_sections() -> dict[str, type]:
+    """pipeline.yaml section -> config class, of every registered prior that has parameters."""
+    return {prior.section: prior.config_class for prior in PRIORS.values() if prior.section is not None}
 
 
-__all__ = ["PRIORS", "PriorContext", "UnseenPrior", "check_prior_kind", "make_prior", "resolve_prior_kind"]
+def make_prior(kind: str, context: PriorContext, config: object | None) -> UnseenPrior:
+    """The prior registered under the resolved ``kind``, built with ``config``: its section's typed config
+    (``PRIORS[kind].section``), None for a prior without one."""
+    return PRIORS[check_prior_kind(kind)](context, config)
+
+
+__all__ = ["PRIORS", "PriorContext", "UnseenPrior", "check_prior_kind", "make_prior", "prior_sections",
+           "resolve_prior_kind"]

@@ -44,9 +44,13 @@ class PriorContext:
 
 
 class UnseenPrior(ABC):
-    """A prior over what no input view saw. ``name`` is its registry key (pipeline.yaml prior.kind)."""
+    """A prior over what no input view saw. ``name`` is its registry key (pipeline.yaml prior.kind); a prior
+    with parameters owns one pipeline.yaml ``section``, read strictly into its ``config_class`` and handed to
+    its constructor (None for a prior without parameters)."""
 
     name: str
+    section: str | None = None
+    config_class: type | None = None
 
     @abstractmethod
     def losses(self, step: int, people: Sequence[PersonGaussians]) -> dict[str, Tensor]:

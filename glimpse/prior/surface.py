@@ -76,6 +76,8 @@ class PersonPrior:
 
 class SurfacePrior(UnseenPrior):
     name = "surface"
+    section = "prior_surface"
+    config_class = SurfacePriorConfig
 
     def __init__(self, context: PriorContext, config: SurfacePriorConfig):
         self.config, self.render, self.scaled, self.seed = config, context.render, context.scaled, context.seed

@@ -38,7 +38,7 @@ from glimpse.io.checkpoint import fingerprint  # noqa: E402
 from glimpse.io.json_file import write_json  # noqa: E402
 from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
-from glimpse.prior import check_prior_kind  # noqa: E402
+from glimpse.prior import PRIORS, check_prior_kind  # noqa: E402
 from glimpse.prior.sds.load import check_sds_can_run, diffusion_ready  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -62,9 +62,10 @@ def run(ctx: StageContext) -> None:
                          dirs["03_masks"] / "occluders", bodies, GaussianModel.from_splats(splats), scene.fps)
     body_model = BodyModel.from_file(resolve_model_path(body))
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in dirs.values()])
+    section = PRIORS[prior_kind].section
     with ctx.timed("train"):
         result = train_joint(inputs, config, render, body, body_model, prior_kind,
-                             {"surface": ctx.section("prior_surface"), "sds": diffusion}, compute.seed, device,
+                             ctx.section(section) if section else None, compute.seed, device,
                              ctx.work, key, ctx.out, dirs["05_textual_inversion"])
     for person in result.people:
         folder = ctx.out / "humans" / person.pid

@@ -71,6 +71,8 @@ def posed_body(person: PersonGaussians, transforms: Tensor, skin_weights: Tensor
 
 class SDSPrior(UnseenPrior):
     name = "sds"
+    section = "diffusion"  # also read by stage 05, which trains the identities
+    config_class = DiffusionConfig
 
     def __init__(self, context: PriorContext, config: DiffusionConfig):
         if context.identity_dir is None:
