@@ -1,6 +1,6 @@
 """Writes tiny, VALID ``glimpse-scene/1`` folders for tests, plus small editing helpers.
 
-``build_valid_scene(root)`` writes: scene.yaml, frames/000000..000002.png (16x12),
+``build_valid_scene(root)`` writes, with glimpse.scene's writer: scene.yaml, frames/000000..000002.png (16x12),
 cameras.json with per-frame poses (frame 1 with its own K), humans/p0 and
 humans/p1 (smpl.npz, keypoints2d.npz, keypoints3d.npz, masks/, reference/), and
 eval/ with one held-out camera ``cam1`` (20x10 images, union masks, p0's masks).
@@ -17,6 +17,9 @@ import numpy as np
 import yaml
 from PIL import Image
 
+from glimpse.scene.model import CameraPose
+from glimpse.scene.writer import SceneWriter
+
 WIDTH, HEIGHT = 16, 12
 EVAL_WIDTH, EVAL_HEIGHT = 20, 10
 PERSONS = ("p0", "p1")
@@ -31,11 +34,6 @@ def rotation_y(angle: float) -> np.ndarray:
 def intrinsics(width: int, height: int, f: float = 20.0) -> list[list[float]]:
     """A pinhole K as JSON lists, principal point at the image centre."""
     return [[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]]
-
-
-def pose(angle: float, t: tuple[float, float, float] = (0.0, 0.0, 3.0)) -> dict:
-    """A JSON pose entry ``{"R", "t"}``."""
-    return {"R": rotation_y(angle).tolist(), "t": list(t)}
 
 
 # --- writing ----------------------------------------------------------------------------------
@@ -105,49 +103,36 @@ def edit_npz(path: Path, **changes: object) -> None:
 # --- the valid scene ----------------------------------------------------------------------------
 
 def build_valid_scene(root: Path, *, n_frames: int = 3, width: int = WIDTH, height: int = HEIGHT) -> Path:
-    """Write a complete valid scene under ``root`` (created) and return ``root``."""
-    root.mkdir(parents=True, exist_ok=True)
+    """Write a complete valid scene at ``root`` (with glimpse.scene's writer, which validates it) and return
+    ``root``."""
     ids = list(range(n_frames))
-    write_yaml(root / "scene.yaml", {
-        "format": "glimpse-scene/1", "name": "tiny_scene", "fps": 10, "camera_motion": "moving",
-        "body_model": "smpl", "overrides": {"04_bg_pretrain": {"iterations": 10}}})
+    scene = SceneWriter(root, "tiny_scene", 10, "moving", "smpl", overrides={"04_bg_pretrain": {"iterations": 10}})
     for i in ids:
-        write_image(root / "frames" / f"{i:06d}.png", rgb(width, height, seed=i))
-    frames = {f"{i:06d}": pose(0.05 * i) for i in ids}
-    frames[f"{ids[-1]:06d}"]["K"] = intrinsics(width, height, f=25.0)
-    write_json(root / "cameras.json", {
-        "format": "glimpse-cameras/1", "width": width, "height": height,
-        "K": intrinsics(width, height), "dist": [0.01, 0.0, 0.0, 0.0], "frames": frames})
+        scene.frame(i, rgb(width, height, seed=i))
+    poses = {i: CameraPose(rotation_y(0.05 * i), np.array([0.0, 0.0, 3.0])) for i in ids}
+    poses[ids[-1]] = CameraPose(poses[ids[-1]].R, poses[ids[-1]].t, np.array(intrinsics(width, height, f=25.0)))
+    scene.input_cameras(width, height, np.array(intrinsics(width, height)), np.array([0.01, 0.0, 0.0, 0.0]), poses)
     for n, pid in enumerate(PERSONS):
-        _write_person(root / "humans" / pid, ids, width, height, seed=n)
-    _write_eval(root / "eval", ids)
-    return root
+        _write_person(scene, pid, ids, width, height, seed=n)
+    eval_pose = CameraPose(rotation_y(0.5), np.array([0.2, 0.0, 3.0]))
+    scene.eval_camera("cam1", EVAL_WIDTH, EVAL_HEIGHT, np.array(intrinsics(EVAL_WIDTH, EVAL_HEIGHT)), eval_pose.R,
+                      eval_pose.t, poses={0: eval_pose})
+    for i in ids:
+        union = mask(EVAL_WIDTH, EVAL_HEIGHT, seed=i) > 0
+        scene.eval_view("cam1", i, rgb(EVAL_WIDTH, EVAL_HEIGHT, seed=10 + i), union, {"p0": union})
+    return scene.finish()
 
 
-def _write_person(folder: Path, ids: list[int], width: int, height: int, seed: int) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
+def _write_person(scene: SceneWriter, pid: str, ids: list[int], width: int, height: int, seed: int) -> None:
     T = len(ids)
     frame_ids = np.array(ids, dtype=np.int64)
-    np.savez(folder / "smpl.npz", frame_ids=frame_ids, betas=np.zeros(10), global_orient=np.zeros((T, 3)),
-             body_pose=np.zeros((T, 69)), transl=np.tile([0.3 * seed, 0.0, 0.0], (T, 1)))
+    scene.smpl(pid, frame_ids, np.zeros(10), np.zeros((T, 3)), np.zeros((T, 69)), np.tile([0.3 * seed, 0.0, 0.0], (T, 1)))
     keypoints = np.zeros((T, 17, 3))
     keypoints[..., 0], keypoints[..., 1], keypoints[..., 2] = width / 2, height / 2, 0.9
-    np.savez(folder / "keypoints2d.npz", frame_ids=frame_ids, layout=np.array("coco17"), keypoints=keypoints)
+    scene.keypoints2d(pid, frame_ids, "coco17", keypoints)
     joints = np.zeros((T, 25, 4))
     joints[..., 3] = 1.0
-    np.savez(folder / "keypoints3d.npz", frame_ids=frame_ids, layout=np.array("openpose25"), joints=joints)
+    scene.keypoints3d(pid, frame_ids, "openpose25", joints)
     for i in ids:
-        write_image(folder / "masks" / f"{i:06d}.png", mask(width, height, seed=i + seed))
-    write_image(folder / "reference" / "front.png", rgb(8, 8, seed=seed))
-
-
-def _write_eval(folder: Path, ids: list[int]) -> None:
-    write_json(folder / "cameras.json", {
-        "format": "glimpse-eval-cameras/1",
-        "cameras": {"cam1": {"K": intrinsics(EVAL_WIDTH, EVAL_HEIGHT), **pose(0.5, (0.2, 0.0, 3.0)),
-                             "width": EVAL_WIDTH, "height": EVAL_HEIGHT,
-                             "frames": {"000000": pose(0.5, (0.2, 0.0, 3.0))}}}})
-    for i in ids:
-        write_image(folder / "cam1" / f"{i:06d}.png", rgb(EVAL_WIDTH, EVAL_HEIGHT, seed=10 + i))
-        write_image(folder / "cam1" / "masks" / f"{i:06d}.png", mask(EVAL_WIDTH, EVAL_HEIGHT, seed=i))
-        write_image(folder / "cam1" / "masks" / "p0" / f"{i:06d}.png", mask(EVAL_WIDTH, EVAL_HEIGHT, seed=i))
+        scene.person_mask(pid, i, mask(width, height, seed=i + seed) > 0)
+    scene.reference(pid, "front", rgb(8, 8, seed=seed))

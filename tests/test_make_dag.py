@@ -20,6 +20,7 @@ from PIL import Image
 
 from glimpse.pipeline.prepare import prepare_run
 from glimpse.pipeline.stages import STAGES, STAGE_NAMES
+from glimpse.scene import SceneWriter
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -40,13 +41,11 @@ stage_main(STAGE, body, "test stage")
 
 
 def write_tiny_scene(root: Path) -> None:
-    (root / "frames").mkdir(parents=True)
+    scene = SceneWriter(root, "tiny", 10, "static")
     rng = np.random.default_rng(0)
     for i in range(3):
-        Image.fromarray(rng.integers(0, 255, (12, 16, 3), dtype=np.uint8)).save(root / "frames" / f"{i:06d}.png")
-    (root / "scene.yaml").write_text(
-        yaml.safe_dump({"format": "glimpse-scene/1", "name": "tiny", "fps": 10, "camera_motion": "static"})
-    )
+        scene.frame(i, rng.integers(0, 255, (12, 16, 3), dtype=np.uint8))
+    scene.finish()
 
 
 @pytest.fixture()

@@ -1,9 +1,10 @@
-"""The scene input contract ``glimpse-scene/1``: validation and reading.
+"""The scene input contract ``glimpse-scene/1``: validation, reading and writing.
 
 ``validate_scene(root)`` lists every violation of a scene folder;
 ``load_scene(root)`` validates, raises :class:`~glimpse.errors.SceneError` when
-anything is wrong, and returns a :class:`Scene`.  The contract itself is
-docs/SCENE_FORMAT.md.
+anything is wrong, and returns a :class:`Scene`; :class:`SceneWriter` writes a
+scene part by part (the fixtures, the tests' scenes, importers).  The contract
+itself is docs/SCENE_FORMAT.md.
 """
 
 from glimpse.scene.model import (
@@ -23,6 +24,7 @@ from glimpse.scene.model import (
 )
 from glimpse.scene.reader import load_scene
 from glimpse.scene.validate import validate_scene
+from glimpse.scene.writer import SceneWriter
 
 __all__ = [
     "CAMERAS_FORMAT",
@@ -36,6 +38,7 @@ __all__ = [
     "Keypoints2D",
     "Keypoints3D",
     "Scene",
+    "SceneWriter",
     "load_scene",
     "read_keypoints2d",
     "read_keypoints3d",

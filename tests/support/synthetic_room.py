@@ -41,16 +41,16 @@ PNG files.
 from __future__ import annotations
 
 import functools
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from glimpse.fixtures.textures import surface_texture
+from glimpse.scene.model import CameraPose
+from glimpse.scene.writer import SceneWriter
 
 __all__ = [
     "PERSON_HEIGHT",
@@ -77,6 +77,8 @@ PERSON_RADIUS: float = 0.28
 PERSON_HEIGHT: float = 1.7
 #: Name of the occluder in ``humans/<pid>/``.
 PERSON_ID: str = "p0"
+#: Frames per second written in scene.yaml.
+SCENE_FPS: float = 10.0
 #: Texture resolution on the room's surfaces (texels per metre, level 0 of the pyramid).
 TEXELS_PER_METRE: float = 160.0
 #: Texture resolution on the person, who is seen from much nearer.
@@ -568,33 +570,17 @@ def make_room_scene(
     K = intrinsics(width, height, fov_deg)
     renderer = get_renderer(seed)
 
-    frames_dir = out_dir / "frames"
-    frames_dir.mkdir(parents=True, exist_ok=True)
-    masks_dir = out_dir / "humans" / PERSON_ID / "masks"
-    if with_person and with_masks:
-        masks_dir.mkdir(parents=True, exist_ok=True)
+    scene = SceneWriter(out_dir, name, SCENE_FPS, motion, "free")
     for i, (R, t) in enumerate(poses):
         view = renderer.render(K, R, t, width, height, people[i] if with_person else None, supersample)
-        stem = f"{i:06d}.png"
-        _write_png(frames_dir / stem, cv2.cvtColor(view.image, cv2.COLOR_RGB2BGR))
+        scene.frame(i, view.image)
         if with_person and with_masks:
-            _write_png(masks_dir / stem, view.mask.astype(np.uint8) * 255)
-
-    scene = {"format": "glimpse-scene/1", "name": name, "fps": 10, "camera_motion": motion,
-             "body_model": "free"}
-    (out_dir / "scene.yaml").write_text(yaml.safe_dump(scene, sort_keys=False))
+            scene.person_mask(PERSON_ID, i, view.mask)
     if write_cameras != "none":
-        cams: dict = {"format": "glimpse-cameras/1", "width": width, "height": height, "K": K.tolist()}
-        if write_cameras == "poses":
-            cams["frames"] = {f"{i:06d}": {"R": R.tolist(), "t": t.tolist()}
-                              for i, (R, t) in enumerate(poses)}
-        (out_dir / "cameras.json").write_text(json.dumps(cams, indent=1))
+        scene.input_cameras(width, height, K, poses={i: CameraPose(R, t) for i, (R, t) in enumerate(poses)}
+                            if write_cameras == "poses" else None)
+    scene.finish()
     return RoomTruth(K=K, width=width, height=height,
                      R={i: R for i, (R, _) in enumerate(poses)},
                      t={i: t for i, (_, t) in enumerate(poses)})
 
-
-def _write_png(path: Path, img: np.ndarray) -> None:
-    """Write an 8-bit PNG (BGR or single channel), raising if OpenCV fails."""
-    if not cv2.imwrite(str(path), img):
-        raise OSError(f"could not write {path}")
