@@ -13,12 +13,13 @@ import torch
 from glimpse.background.config import BackgroundConfig
 from glimpse.background.evaluate import render_views, seen_weights
 from glimpse.background.init import InitialCloud, Sphere, colour_from_frames, sphere_points
-from glimpse.background.train import BackgroundTrainer, TrainingLog, TrainingView
+from glimpse.background.train import BackgroundTrainer, TrainingView
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.gaussians.density import keep_only
 from glimpse.gaussians.model import GaussianModel, knn_scales
+from glimpse.gaussians.trainer import TrainingLog
 from glimpse.gaussians.training import scene_extent
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.io.ply_points import read_points_ply

@@ -6,34 +6,29 @@ background colour, compares it with the frame on the pixels no person covers:
 ``lambda * sum((|mu - c| - R)^2)``. Adam steps every parameter; adaptive density control
 and opacity resets follow the schedule; the active SH degree grows over time.
 
+The loop itself (resume, checkpoints, progress, loss history) is glimpse.gaussians.trainer's.
 Everything random is a function of (seed, iteration), and the state that changes is saved in
 checkpoints, so a run resumed from a checkpoint gives the same result as one never stopped.
 """
 
 from __future__ import annotations
 
-import logging
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from torch import Tensor
-from tqdm import tqdm
 
 from glimpse.background.config import BackgroundConfig
 from glimpse.background.init import Sphere
 from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.gaussians.trainer import GaussianTrainer
 from glimpse.gaussians.training import scene_extent, training_background, view_order
-from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
 from glimpse.metrics.losses import dssim_loss_on, l1_loss, mse_loss
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
-
-log = logging.getLogger("glimpse")
-LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
 
 
 @dataclass
@@ -47,21 +42,6 @@ class TrainingView:
 
     def target(self) -> Tensor:
         return self.image.float() / 255.0
-
-
-@dataclass
-class TrainingLog:
-    """What the run did: losses every LOSS_HISTORY_EVERY iterations, densification events, timing."""
-
-    losses: list[tuple[int, float]] = field(default_factory=list)
-    densify_events: list[dict] = field(default_factory=list)
-    resumed_from: int = 0
-    iterations_run: int = 0  # in this process (not counting those before a resume)
-    seconds: float = 0.0
-
-    @property
-    def iterations_per_s(self) -> float:
-        return self.iterations_run / self.seconds if self.seconds > 0 else 0.0
 
 
 def photometric_loss(config: BackgroundConfig, rendered: Tensor, target: Tensor, background: Tensor) -> Tensor:
@@ -79,27 +59,26 @@ def sphere_regulariser(means: Tensor, sphere: Sphere, weight: float) -> Tensor:
     return weight * ((means - centre).norm(dim=1) - sphere.radius).square().sum()
 
 
-class BackgroundTrainer:
-    """Trains ``model`` on ``views``; ``checkpoint`` (a path) is read at start and written every
-    ``config.checkpoint_every`` iterations; ``key`` fingerprints the inputs and parameters."""
+class BackgroundTrainer(GaussianTrainer):
+    """Trains ``model`` on ``views`` (checkpoints, resume and progress: GaussianTrainer)."""
+
+    name = "04 background"
 
     def __init__(self, model: GaussianModel, views: list[TrainingView], config: BackgroundConfig,
                  render: RenderConfig, sphere: Sphere | None, seed: int, checkpoint: Path, key: str):
+        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key)
         self.model, self.views, self.config, self.render = model, views, config, render
-        self.sphere, self.seed, self.checkpoint, self.key = sphere, seed, checkpoint, key
+        self.sphere, self.seed = sphere, seed
         self.extent = scene_extent([v.camera for v in views], model.means.detach())
         self.rates, self.densify = config.scaled_lr, config.scaled_densify
         self.optimizer = make_optimizer(model, self.rates, self.extent)
         self.stats = DensityStats(len(model), model.means.device)
-        self.log = TrainingLog()
-        self.step = 0
 
     # --- checkpoints -------------------------------------------------------------------------
 
     def _state(self) -> dict:
-        return {"step": self.step, "parameters": {k: v.detach().cpu() for k, v in self.model.parameter_dict().items()},
-                "optimizer": self.optimizer.state_dict(), "stats": {k: v.cpu() for k, v in self.stats.state_dict().items()},
-                "losses": self.log.losses, "densify_events": self.log.densify_events}
+        return {"parameters": {k: v.detach().cpu() for k, v in self.model.parameter_dict().items()},
+                "optimizer": self.optimizer.state_dict(), "stats": {k: v.cpu() for k, v in self.stats.state_dict().items()}}
 
     def _restore(self, state: dict) -> None:
         device = self.model.means.device
@@ -107,12 +86,19 @@ class BackgroundTrainer:
         self.optimizer = make_optimizer(self.model, self.rates, self.extent)
         self.optimizer.load_state_dict(state["optimizer"])
         self.stats.load_state_dict({k: v.to(device) for k, v in state["stats"].items()})
-        self.log.losses, self.log.densify_events = list(state["losses"]), list(state["densify_events"])
-        self.step = self.log.resumed_from = int(state["step"])
+
+    def _history_entry(self, values: dict[str, float]) -> tuple[int, float]:
+        return self.step, round(values["total"], 6)
+
+    def _counts(self) -> str:
+        return f"{len(self.model)} Gaussians"
+
+    def _progress(self, values: dict[str, float]) -> dict[str, str]:
+        return {"loss": f"{values['total']:.4f}", "gaussians": str(len(self.model))}
 
     # --- one iteration -----------------------------------------------------------------------
 
-    def _iteration(self) -> float:
+    def _iteration(self) -> dict[str, float]:
         step, config = self.step + 1, self.config
         set_position_lr(self.optimizer, self.rates, self.extent, step)
         epoch, slot = divmod(step - 1, len(self.views))
@@ -132,7 +118,7 @@ class BackgroundTrainer:
             self.optimizer.zero_grad(set_to_none=True)
             self._density_control(step)
         self.step = step
-        return float(loss.detach())
+        return {"total": float(loss.detach())}
 
     def _density_control(self, step: int) -> None:
         d = self.densify
@@ -144,29 +130,3 @@ class BackgroundTrainer:
             self.stats = DensityStats(len(self.model), self.model.means.device)
         if d.resets_opacity_at(step):
             reset_opacity(self.model, self.optimizer, d.opacity_reset_value)
-
-    # --- the run -------------------------------------------------------------------------------
-
-    def run(self) -> TrainingLog:
-        total = self.config.total_iterations
-        state = load_checkpoint(self.checkpoint, self.key)
-        if state is not None:
-            self._restore(state)
-            log.info("resuming background training from iteration %d (%s)", self.step, self.checkpoint)
-        started = time.perf_counter()
-        bar = tqdm(total=total, initial=self.step, desc="04 background", unit="it", disable=None, leave=False)
-        while self.step < total:
-            loss = self._iteration()
-            if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
-                self.log.losses.append((self.step, round(loss, 6)))
-            bar.update(1)
-            bar.set_postfix(loss=f"{loss:.4f}", gaussians=len(self.model), refresh=False)
-            if self.step % self.config.checkpoint_every == 0 and self.step < total:
-                save_checkpoint(self.checkpoint, self.key, self._state())
-                log.info("iteration %d/%d: loss %.4f, %d Gaussians (checkpoint saved)", self.step, total, loss,
-                         len(self.model))
-            self.log.iterations_run += 1
-        bar.close()
-        self.log.seconds = time.perf_counter() - started
-        return self.log
-

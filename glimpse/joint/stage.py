@@ -17,13 +17,14 @@ from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.gaussians.model import GaussianModel
+from glimpse.gaussians.trainer import TrainingLog
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians, initial_person
 from glimpse.humans.visibility import BodyVisibility, body_visibility
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.io.video import write_mp4
 from glimpse.joint.config import JointConfig
-from glimpse.joint.train import JointLog, JointTrainer, JointView, people_box
+from glimpse.joint.train import JointTrainer, JointView, people_box
 from glimpse.metrics.image import psnr
 from glimpse.metrics.lpips import LPIPS
 from glimpse.prior import PriorContext, make_prior
@@ -172,7 +173,7 @@ def _mean_of(frames_doc: dict, key: str) -> float | None:
     return round(float(np.mean(values)), 3) if values else None
 
 
-def _report(training: JointLog, config: JointConfig, people: list[PersonGaussians], initial_counts: dict,
+def _report(training: TrainingLog, config: JointConfig, people: list[PersonGaussians], initial_counts: dict,
             frames_doc: dict, prior: str) -> dict:
     return {"format": REPORT_FORMAT, "prior": prior, "iterations": config.total_iterations,
             "resumed_from_iteration": training.resumed_from, "iterations_per_s": round(training.iterations_per_s, 3),

@@ -14,30 +14,27 @@ separate losses, if any, each take their own step on one person's optimiser (the
 Schedule (all scaled by schedule_scale): human means fixed and opacities >= early_min_opacity
 until fix_centres_until; human densification at densify_at; pruning of transparent, large or
 escaped human Gaussians every prune_every after that; the humans' SH degree grows every
-sh_degree_every. The background keeps its count. Everything random is a function of
-(seed, iteration), and checkpoints hold every changing state, so a resumed run ends as an
-uninterrupted one.
+sh_degree_every. The background keeps its count. The loop itself (resume, checkpoints, progress,
+loss history) is glimpse.gaussians.trainer's. Everything random is a function of (seed, iteration),
+and checkpoints hold every changing state, so a resumed run ends as an uninterrupted one.
 """
 
 from __future__ import annotations
 
-import logging
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import Tensor
-from tqdm import tqdm
 
 from glimpse.gaussians.density import DensifyConfig, DensityStats, densify_and_prune, keep_only
 from glimpse.gaussians.model import GaussianModel, logit
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.gaussians.trainer import GaussianTrainer
 from glimpse.gaussians.training import scene_extent, training_background, view_order
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
-from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
 from glimpse.joint.config import JointConfig
 from glimpse.metrics.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_loss
 from glimpse.metrics.lpips import LPIPS
@@ -45,8 +42,6 @@ from glimpse.prior.base import UnseenPrior
 from glimpse.render import Camera, RenderOutput
 from glimpse.render.config import RenderConfig
 
-log = logging.getLogger("glimpse")
-LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
 HUMAN_EXTENT = 1.0  # canonical frame: human learning rates are in metres of body
 NEVER = 2**62  # an iteration no run reaches
 
@@ -64,19 +59,6 @@ class JointView:
 
     def target(self) -> Tensor:
         return self.image.float() / 255.0
-
-
-@dataclass
-class JointLog:
-    losses: list[dict] = field(default_factory=list)
-    densify_events: list[dict] = field(default_factory=list)
-    resumed_from: int = 0
-    iterations_run: int = 0
-    seconds: float = 0.0
-
-    @property
-    def iterations_per_s(self) -> float:
-        return self.iterations_run / self.seconds if self.seconds > 0 else 0.0
 
 
 def reconstruction_terms(config: JointConfig, lpips_module: LPIPS | None, rendered: Tensor, target: Tensor,
@@ -114,15 +96,17 @@ def prune_person(person: PersonGaussians, optimizer: torch.optim.Optimizer, stat
     return int(drop.sum())
 
 
-class JointTrainer:
-    """Trains ``people`` and ``background`` on ``views``; ``checkpoint`` (a path) is read at start and
-    written every ``config.checkpoint_every`` iterations; ``key`` fingerprints inputs and parameters."""
+class JointTrainer(GaussianTrainer):
+    """Trains ``people`` and ``background`` on ``views`` (checkpoints, resume and progress: GaussianTrainer)."""
+
+    name = "06 joint"
 
     def __init__(self, background: GaussianModel, people: list[PersonGaussians], views: list[JointView],
                  config: JointConfig, render: RenderConfig, prior: UnseenPrior, lpips_module: LPIPS | None,
                  seed: int, checkpoint: Path, key: str):
+        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key)
         self.background, self.people, self.views, self.config, self.render = background, people, views, config, render
-        self.prior, self.lpips, self.seed, self.checkpoint, self.key = prior, lpips_module, seed, checkpoint, key
+        self.prior, self.lpips, self.seed = prior, lpips_module, seed
         self.background_degree = min(background.sh_degree, render.sh_degree)
         self.extent = scene_extent([v.camera for v in views], background.means.detach())
         self.background_rates = config.scaled_rates(config.background_lr)
@@ -130,8 +114,6 @@ class JointTrainer:
         self.densify = human_densify_config(config)
         self._make_optimizers()
         self.stats = [DensityStats(len(p.model), p.model.means.device) for p in people]
-        self.log = JointLog()
-        self.step = 0
 
     def _make_optimizers(self) -> None:
         self.background_optimizer = make_optimizer(self.background, self.background_rates, self.extent)
@@ -149,13 +131,12 @@ class JointTrainer:
         def params(model: GaussianModel) -> dict:
             return {k: v.detach().cpu() for k, v in model.parameter_dict().items()}
 
-        return {"step": self.step, "background": params(self.background),
+        return {"background": params(self.background),
                 "people": [{"parameters": params(p.model), "pose_offsets": p.pose_offsets.detach().cpu()}
                            for p in self.people],
                 "optimizers": [o.state_dict() for o in self._optimizers()],
                 "stats": [{k: v.cpu() for k, v in s.state_dict().items()} for s in self.stats],
-                "prior": self.prior.state_dict(),
-                "losses": self.log.losses, "densify_events": self.log.densify_events}
+                "prior": self.prior.state_dict()}
 
     def _restore(self, state: dict) -> None:
         device = self.background.means.device
@@ -170,8 +151,16 @@ class JointTrainer:
         for stats, saved in zip(self.stats, state["stats"]):
             stats.load_state_dict({k: v.to(device) for k, v in saved.items()})
         self.prior.load_state_dict(state["prior"])
-        self.log.losses, self.log.densify_events = list(state["losses"]), list(state["densify_events"])
-        self.step = self.log.resumed_from = int(state["step"])
+
+    def _history_entry(self, values: dict[str, float]) -> dict:
+        return {"iteration": self.step, **{k: round(v, 6) for k, v in values.items()}}
+
+    def _counts(self) -> str:
+        return "human Gaussians " + "/".join(str(len(p.model)) for p in self.people)
+
+    def _progress(self, values: dict[str, float]) -> dict[str, str]:
+        return {"loss": f"{values['total']:.4f}", "mse": f"{values['mse']:.4f}",
+                "humans": "/".join(str(len(p.model)) for p in self.people)}
 
     # --- one iteration -----------------------------------------------------------------------
 
@@ -263,32 +252,6 @@ class JointTrainer:
             event["count"] = len(person.model)
             self.log.densify_events.append(event)
             self.prior.gaussians_changed(person)
-
-    # --- the run -------------------------------------------------------------------------------
-
-    def run(self) -> JointLog:
-        total = self.config.total_iterations
-        state = load_checkpoint(self.checkpoint, self.key)
-        if state is not None:
-            self._restore(state)
-            log.info("resuming joint optimisation from iteration %d (%s)", self.step, self.checkpoint)
-        started = time.perf_counter()
-        bar = tqdm(total=total, initial=self.step, desc="06 joint", unit="it", disable=None, leave=False)
-        while self.step < total:
-            values = self._iteration()
-            if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
-                self.log.losses.append({"iteration": self.step, **{k: round(v, 6) for k, v in values.items()}})
-            bar.update(1)
-            counts = "/".join(str(len(p.model)) for p in self.people)
-            bar.set_postfix(loss=f"{values['total']:.4f}", mse=f"{values['mse']:.4f}", humans=counts, refresh=False)
-            if self.step % self.config.checkpoint_every == 0 and self.step < total:
-                save_checkpoint(self.checkpoint, self.key, self._state())
-                log.info("iteration %d/%d: loss %.4f, human Gaussians %s (checkpoint saved)", self.step, total,
-                         values["total"], counts)
-            self.log.iterations_run += 1
-        bar.close()
-        self.log.seconds = time.perf_counter() - started
-        return self.log
 
 
 def people_box(union: np.ndarray, margin_px: int, min_px: int) -> tuple[int, int, int, int] | None:
