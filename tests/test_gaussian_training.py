@@ -19,6 +19,7 @@ from glimpse.gaussians.density import (
 from glimpse.gaussians.model import GaussianModel, knn_scales
 from glimpse.gaussians.optim import LearningRates, exponential_lr, make_optimizer, set_position_lr
 from glimpse.gaussians.ply import read_gaussians_ply, write_gaussians_ply
+from glimpse.gaussians.strategy import DefaultStrategy, HumanDensity, PeopleStrategy
 from glimpse.io.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.render.projection import quat_to_rotation
 
@@ -176,3 +177,45 @@ def test_checkpoint_is_resumed_only_with_the_same_fingerprint(tmp_path, caplog):
     path.write_bytes(b"truncated")
     assert load_checkpoint(path, key) is None and "unreadable" in caplog.text
     assert load_checkpoint(tmp_path / "absent.pt", key) is None
+
+
+# --- the densification strategies ----------------------------------------------------------------------------
+
+def test_the_default_strategy_follows_3dgs_schedule():
+    schedule = DensifyConfig(**{**vars(DENSIFY), "start": 2, "stop": 9, "every": 3, "opacity_reset_every": 4})
+    strategy = DefaultStrategy(schedule, extent=1.0)
+    model = _model(4)
+    optimizer = _stepped_optimizer(model)
+    state = strategy.initialize_state(model)
+    changed, reset = [], []
+    for step in range(1, 13):
+        gathered = state.views.clone()
+        strategy.observe(state, torch.full((len(model), 2), 1.0), torch.ones(len(model)), 2, 2, step)
+        assert torch.equal(state.views, gathered + 1) == (step < schedule.stop)  # nothing gathered from stop on
+        with torch.no_grad():
+            model.opacity_logits.fill_(2.0)  # opacity 0.88, far above the reset value
+        if strategy.adapt(model, optimizer, state, step, 2, seed=step) is not None:
+            changed.append(step)
+            assert not state.views.any() and len(state.views) == len(model)  # gathering starts afresh
+        if bool((model.opacities() <= schedule.opacity_reset_value + 1e-6).all()):
+            reset.append(step)
+    assert changed == [3, 6] and reset == [4, 8]
+
+
+def test_the_people_strategy_densifies_at_its_steps_and_prunes_what_left_the_region():
+    config = HumanDensity(densify_at=[20, 30], grad_threshold=1e-3, reference_height_px=0.0, split_scale_m=0.01,
+                          max_gaussians=0, prune_every=10, prune_min_opacity=0.005, prune_max_scale_m=0.5)
+    strategy = PeopleStrategy(config, lambda step: step // 10, free_after=1)  # a run at a tenth of the schedule
+    assert strategy.densify_steps == {2, 3} and [s for s in range(1, 6) if strategy.prunes_at(s)] == [2, 3, 4, 5]
+    model = _model(6)
+    optimizer = _stepped_optimizer(model)
+    state = strategy.initialize_state(model)
+    assert strategy.adapt(model, optimizer, state, 1, 2, seed=0) is None
+    inside = model.means.detach()[:, 0] > 0  # the region: x > 0
+    kept = model.means.detach()[inside].clone()
+    event = strategy.adapt(model, optimizer, state, 4, 2, seed=0, region=lambda means: means[:, 0] > 0)
+    assert event == {"pruned_large_or_transparent": int((~inside).sum()), "count": int(inside.sum())}
+    assert torch.equal(model.means.detach(), kept) and len(state.views) == len(model)
+    state.update(torch.full((len(model), 2), 1.0), torch.ones(len(model)), 2, 2)  # every Gaussian over threshold
+    event = strategy.adapt(model, optimizer, state, 3, 2, seed=0)
+    assert event["cloned"] + event["split"] == len(kept) and event["count"] == 2 * len(kept)

@@ -95,11 +95,11 @@ def test_polar_rotation_matches_svd_on_blends_of_bone_rotations():
 def test_schedule_is_the_papers_scaled():
     config = replace(JOINT, schedule_scale=0.1)
     assert config.total_iterations == 1200
-    assert config.densify_steps == {200, 250, 300}
+    assert config.people_strategy().densify_steps == {200, 250, 300}
     assert config.centres_fixed_at(150) and not config.centres_fixed_at(151)
-    assert [s for s in range(1, 400) if config.prunes_at(s)] == [200, 250, 300, 350]
+    assert [s for s in range(1, 400) if config.people_strategy().prunes_at(s)] == [200, 250, 300, 350]
     assert [config.human_sh_degree(s, 2) for s in (1, 200, 201, 401, 1000)] == [0, 0, 1, 2, 2]
-    assert replace(JOINT, schedule_scale=1.0).densify_steps == {2000, 2500, 3000}
+    assert replace(JOINT, schedule_scale=1.0).people_strategy().densify_steps == {2000, 2500, 3000}
 
 
 def test_occluded_pixels_give_no_gradient_and_people_are_not_excluded():

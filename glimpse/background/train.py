@@ -21,11 +21,11 @@ from torch import Tensor
 
 from glimpse.background.config import BackgroundConfig
 from glimpse.background.init import Sphere
-from glimpse.gaussians.density import DensityStats, densify_and_prune, reset_opacity
 from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
+from glimpse.gaussians.strategy import DefaultStrategy
 from glimpse.gaussians.trainer import GaussianTrainer
-from glimpse.gaussians.training import scene_extent, training_background, view_order
+from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background, view_order
 from glimpse.metrics.losses import dssim_loss_on, l1_loss, mse_loss
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
@@ -70,9 +70,9 @@ class BackgroundTrainer(GaussianTrainer):
         self.model, self.views, self.config, self.render = model, views, config, render
         self.sphere, self.seed = sphere, seed
         self.extent = scene_extent([v.camera for v in views], model.means.detach())
-        self.rates, self.densify = config.scaled_lr, config.scaled_densify
+        self.rates, self.strategy = config.scaled_lr, DefaultStrategy(config.scaled_densify, self.extent)
         self.optimizer = make_optimizer(model, self.rates, self.extent)
-        self.stats = DensityStats(len(model), model.means.device)
+        self.stats = self.strategy.initialize_state(model)
 
     # --- checkpoints -------------------------------------------------------------------------
 
@@ -112,8 +112,9 @@ class BackgroundTrainer(GaussianTrainer):
         total = loss + sphere_regulariser(self.model.means, self.sphere, config.sphere_reg_weight) if self.sphere else loss
         total.backward()
         with torch.no_grad():
-            if step < self.densify.stop and out.means2d.grad is not None:
-                self.stats.update(out.means2d.grad, out.radii, view.camera.width, view.camera.height)
+            if out.means2d.grad is not None:
+                self.strategy.observe(self.stats, out.means2d.grad, out.radii, view.camera.width, view.camera.height,
+                                      step)
             self.optimizer.step()
             self.optimizer.zero_grad(set_to_none=True)
             self._density_control(step)
@@ -121,12 +122,7 @@ class BackgroundTrainer(GaussianTrainer):
         return {"total": float(loss.detach())}
 
     def _density_control(self, step: int) -> None:
-        d = self.densify
-        if d.densifies_at(step):
-            generator = torch.Generator(device=self.model.means.device).manual_seed(self.seed * 1_000_003 + step)
-            event = densify_and_prune(self.model, self.optimizer, self.stats, d, self.extent,
-                                      self.views[0].camera.height, d.prunes_large_at(step), generator)
+        event = self.strategy.adapt(self.model, self.optimizer, self.stats, step, self.views[0].camera.height,
+                                    self.seed * SEED_STRIDE + step)
+        if event is not None:
             self.log.densify_events.append({"iteration": step, **event})
-            self.stats = DensityStats(len(self.model), self.model.means.device)
-        if d.resets_opacity_at(step):
-            reset_opacity(self.model, self.optimizer, d.opacity_reset_value)

@@ -28,6 +28,13 @@ SPLIT_COUNT = 2  # a split Gaussian becomes this many (3DGS: N = 2)
 SPLIT_SCALE_DIVISOR = 1.6  # their scales are the parent's divided by this (3DGS: 0.8 * N)
 
 
+def screen_threshold(grad_threshold: float, reference_height_px: float, height: int) -> float:
+    """The gradient threshold for images ``height`` pixels tall: a Gaussian of a given size in pixels
+    gets an NDC gradient proportional to 1 / height from a loss averaged over pixels, so the threshold,
+    given at ``reference_height_px``, scales with reference / height (0: no scaling, as 3DGS)."""
+    return grad_threshold * (reference_height_px / height if reference_height_px > 0 else 1.0)
+
+
 @dataclass(frozen=True)
 class DensifyConfig:
     """Schedule (iterations, already multiplied by schedule_scale) and thresholds; pipeline.yaml
@@ -47,10 +54,7 @@ class DensifyConfig:
     max_gaussians: int
 
     def threshold_at(self, height: int) -> float:
-        """The gradient threshold for images ``height`` pixels tall: a Gaussian of a given size in pixels
-        gets an NDC gradient proportional to 1 / height from a loss averaged over pixels, so the threshold,
-        given at ``reference_height_px``, scales with reference / height (0: no scaling, as 3DGS)."""
-        return self.grad_threshold * (self.reference_height_px / height if self.reference_height_px > 0 else 1.0)
+        return screen_threshold(self.grad_threshold, self.reference_height_px, height)
 
     def densifies_at(self, step: int) -> bool:
         """``step`` counts completed iterations (1-based, 3DGS's ``iteration``)."""
@@ -80,6 +84,10 @@ class DensityStats:
         self.grad_sum[drawn] += norms[drawn]
         self.views[drawn] += 1
         self.max_radii[drawn] = torch.maximum(self.max_radii[drawn], radii[drawn].to(self.max_radii))
+
+    def reset(self, count: int) -> None:
+        """Start gathering afresh for ``count`` Gaussians (after a densification)."""
+        self.__init__(count, self.grad_sum.device)
 
     def keep(self, rows: Tensor) -> None:
         """Keep the statistics of the Gaussians where ``rows [N]`` (bool) is True (after a pruning)."""
@@ -121,21 +129,22 @@ def keep_only(model: GaussianModel, optimizer: torch.optim.Optimizer, keep: Tens
     reindex(model, optimizer, tensors, index, torch.zeros(len(index), dtype=torch.bool, device=index.device))
 
 
-def densify_and_prune(model: GaussianModel, optimizer: torch.optim.Optimizer, stats: DensityStats,
-                      config: DensifyConfig, extent: float, height: int, prune_large: bool,
-                      generator: torch.Generator) -> dict:
-    """One densification: clone, split, prune (``height``: of the training images, pixels). Returns counts;
-    ``stats`` must be reset afterwards."""
+def densify(model: GaussianModel, optimizer: torch.optim.Optimizer, stats: DensityStats, threshold: float,
+            split_above: float, max_gaussians: int, generator: torch.Generator) -> tuple[dict, Tensor]:
+    """Clone the small and split the large (largest scale above ``split_above``, world units) of the Gaussians
+    whose mean screen gradient reaches ``threshold``, keeping at most ``max_gaussians`` (0: no cap). Returns the
+    counts and the largest screen radius [N'] of each Gaussian afterwards (0 for the new ones); ``stats`` must be
+    reset afterwards."""
     grads = stats.mean_grad()
     with torch.no_grad():
         largest = model.scales().max(dim=1).values
-        wanted = grads >= config.threshold_at(height)
-        budget = max(config.max_gaussians - len(model), 0) if config.max_gaussians > 0 else len(model) * SPLIT_COUNT
+        wanted = grads >= threshold
+        budget = max(max_gaussians - len(model), 0) if max_gaussians > 0 else len(model) * SPLIT_COUNT
         if int(wanted.sum()) * (SPLIT_COUNT - 1) > budget:  # over the cap: keep the largest gradients
             order = torch.argsort(torch.where(wanted, grads, torch.full_like(grads, -1.0)), descending=True)
             wanted = torch.zeros_like(wanted)
             wanted[order[: budget // (SPLIT_COUNT - 1)]] = True
-        small = largest <= config.percent_dense * extent
+        small = largest <= split_above
         clone, split = wanted & small, wanted & ~small
         params = {name: param.detach() for name, param in model.parameter_dict().items()}
         clone_idx, split_idx = torch.nonzero(clone).squeeze(1), torch.nonzero(split).squeeze(1)
@@ -149,12 +158,24 @@ def densify_and_prune(model: GaussianModel, optimizer: torch.optim.Optimizer, st
                                       device=source.device)])
         reindex(model, optimizer, tensors, source, fresh)
         radii = torch.cat([stats.max_radii[kept_idx], torch.zeros(len(source) - len(kept_idx), device=source.device)])
+    return {"cloned": len(clone_idx), "split": len(split_idx)}, radii
+
+
+def densify_and_prune(model: GaussianModel, optimizer: torch.optim.Optimizer, stats: DensityStats,
+                      config: DensifyConfig, extent: float, height: int, prune_large: bool,
+                      generator: torch.Generator) -> dict:
+    """One densification of 3DGS: clone, split, then prune the transparent and, with ``prune_large``, those too
+    large on screen or in the world (``height``: of the training images, pixels; ``extent``: the scene's, world
+    units). Returns counts; ``stats`` must be reset afterwards."""
+    counts, radii = densify(model, optimizer, stats, config.threshold_at(height), config.percent_dense * extent,
+                            config.max_gaussians, generator)
+    with torch.no_grad():
         prune = model.opacities() < config.min_opacity
         if prune_large:
             prune |= radii > config.max_screen_px
             prune |= model.scales().max(dim=1).values > config.max_world_fraction * extent
         keep_only(model, optimizer, ~prune)
-    return {"cloned": len(clone_idx), "split": len(split_idx), "pruned": int(prune.sum()), "count": len(model)}
+    return {**counts, "pruned": int(prune.sum()), "count": len(model)}
 
 
 def _split_children(params: dict[str, Tensor], index: Tensor, generator: torch.Generator) -> dict[str, Tensor]:

@@ -13,6 +13,7 @@ from torch import Tensor
 from glimpse.render import Camera
 
 FIXED_COLOURS = {"black": (0.0, 0.0, 0.0), "white": (1.0, 1.0, 1.0)}
+SEED_STRIDE = 1_000_003  # the random stream of iteration i of a run seeded s starts from s * stride + i
 CAMERA_SPREAD_MARGIN = 1.1  # 3DGS's cameras_extent: this times the largest camera distance from their mean
 
 BackgroundColour = Literal["random", "black", "white"]

@@ -7,6 +7,7 @@ from typing import Literal
 
 from glimpse.errors import ConfigError
 from glimpse.gaussians.optim import LearningRates
+from glimpse.gaussians.strategy import HumanDensity, PeopleStrategy
 from glimpse.gaussians.training import scaled_iteration
 from glimpse.humans.visibility import VisibilityConfig
 
@@ -20,18 +21,6 @@ class JointLossWeights:
     hard_surface: float
     lpips_margin_px: int
     lpips_min_px: int
-
-
-@dataclass(frozen=True)
-class HumanDensity:
-    densify_at: list[int]
-    grad_threshold: float
-    reference_height_px: float
-    split_scale_m: float
-    max_gaussians: int
-    prune_every: int
-    prune_min_opacity: float
-    prune_max_scale_m: float
 
 
 @dataclass(frozen=True)
@@ -71,14 +60,10 @@ class JointConfig:
     def total_iterations(self) -> int:
         return self.scaled(self.iterations)
 
-    @property
-    def densify_steps(self) -> frozenset[int]:
-        return frozenset(self.scaled(i) for i in self.density.densify_at)
-
-    def prunes_at(self, step: int) -> bool:
-        """Large or transparent human Gaussians are pruned every ``prune_every`` (scaled) iterations,
-        once the centres are free to move."""
-        return step > self.scaled(self.fix_centres_until) and step % self.scaled(self.density.prune_every) == 0
+    def people_strategy(self) -> PeopleStrategy:
+        """The people's densification: at the (scaled) densify_at iterations, and pruning every prune_every
+        (scaled) iterations once the centres are free to move."""
+        return PeopleStrategy(self.density, self.scaled, self.scaled(self.fix_centres_until))
 
     def centres_fixed_at(self, step: int) -> bool:
         return step <= self.scaled(self.fix_centres_until)

@@ -28,11 +28,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from glimpse.gaussians.density import DensifyConfig, DensityStats, densify_and_prune, keep_only
 from glimpse.gaussians.model import GaussianModel, logit
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
 from glimpse.gaussians.trainer import GaussianTrainer
-from glimpse.gaussians.training import scene_extent, training_background, view_order
+from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background, view_order
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.config import JointConfig
@@ -43,7 +42,7 @@ from glimpse.render import Camera, RenderOutput
 from glimpse.render.config import RenderConfig
 
 HUMAN_EXTENT = 1.0  # canonical frame: human learning rates are in metres of body
-NEVER = 2**62  # an iteration no run reaches
+PERSON_SEED_STRIDE = 101  # person k's densification at iteration i draws from seed * SEED_STRIDE + i * stride + k
 
 
 @dataclass
@@ -71,31 +70,6 @@ def reconstruction_terms(config: JointConfig, lpips_module: LPIPS | None, render
     return terms
 
 
-def human_densify_config(config: JointConfig) -> DensifyConfig:
-    """The humans' thresholds as a DensifyConfig (their schedule is JointConfig's; sizes in metres of body)."""
-    d = config.density
-    return DensifyConfig(start=0, stop=NEVER, every=1, grad_threshold=d.grad_threshold,
-                         reference_height_px=d.reference_height_px, percent_dense=d.split_scale_m / HUMAN_EXTENT,
-                         min_opacity=d.prune_min_opacity, max_screen_px=float("inf"),
-                         max_world_fraction=float("inf"), opacity_reset_every=NEVER, opacity_reset_value=1.0,
-                         max_gaussians=d.max_gaussians)
-
-
-def prune_person(person: PersonGaussians, optimizer: torch.optim.Optimizer, stats: DensityStats,
-                 config: JointConfig) -> int:
-    """Drop the person's transparent Gaussians, those larger than prune_max_scale_m, and those that left the
-    skinning grid. Returns how many were dropped."""
-    model = person.model
-    with torch.no_grad():
-        drop = model.opacities() < config.density.prune_min_opacity
-        drop |= model.scales().max(dim=1).values > config.density.prune_max_scale_m
-        drop |= ~person.grid.inside(model.means)
-        if drop.any():
-            keep_only(model, optimizer, ~drop)
-            stats.keep(~drop)
-    return int(drop.sum())
-
-
 class JointTrainer(GaussianTrainer):
     """Trains ``people`` and ``background`` on ``views`` (checkpoints, resume and progress: GaussianTrainer)."""
 
@@ -111,9 +85,9 @@ class JointTrainer(GaussianTrainer):
         self.extent = scene_extent([v.camera for v in views], background.means.detach())
         self.background_rates = config.scaled_rates(config.background_lr)
         self.human_rates = config.scaled_rates(config.lr)
-        self.densify = human_densify_config(config)
+        self.strategy = config.people_strategy()
         self._make_optimizers()
-        self.stats = [DensityStats(len(p.model), p.model.means.device) for p in people]
+        self.stats = [self.strategy.initialize_state(p.model) for p in people]
 
     def _make_optimizers(self) -> None:
         self.background_optimizer = make_optimizer(self.background, self.background_rates, self.extent)
@@ -185,8 +159,8 @@ class JointTrainer(GaussianTrainer):
             weight = self.prior.recon_weight(step)  # densification reads gradients of the unweighted loss
             for k, rows in gaussians.rows.items():
                 if out.means2d.grad is not None:
-                    self.stats[k].update(out.means2d.grad[rows] / weight, out.radii[rows], view.camera.width,
-                                         view.camera.height)
+                    self.strategy.observe(self.stats[k], out.means2d.grad[rows] / weight, out.radii[rows],
+                                          view.camera.width, view.camera.height, step)
             self._step(self._optimizers(), fixed)
         separate = self._separate_steps(step, fixed)
         with torch.no_grad():
@@ -235,23 +209,14 @@ class JointTrainer(GaussianTrainer):
         return total + sum(prior_terms.values()), terms
 
     def _density_control(self, step: int, height: int) -> None:
-        config = self.config
-        densify, prune = step in config.densify_steps, config.prunes_at(step)
-        if not (densify or prune):
-            return
+        """Each person's densification and pruning, as the people's strategy schedules them; Gaussians that
+        leave the person's skinning grid are pruned."""
         for k, (person, optimizer) in enumerate(zip(self.people, self.person_optimizers)):
-            event: dict = {"iteration": step, "person": person.pid}
-            if densify:
-                generator = torch.Generator(device=person.model.means.device).manual_seed(
-                    self.seed * 1_000_003 + step * 101 + k)
-                event.update(densify_and_prune(person.model, optimizer, self.stats[k], self.densify, HUMAN_EXTENT,
-                                               height, False, generator))
-                self.stats[k] = DensityStats(len(person.model), person.model.means.device)
-            if prune:
-                event["pruned_large_or_transparent"] = prune_person(person, optimizer, self.stats[k], config)
-            event["count"] = len(person.model)
-            self.log.densify_events.append(event)
-            self.prior.gaussians_changed(person)
+            event = self.strategy.adapt(person.model, optimizer, self.stats[k], step, height,
+                                        self.seed * SEED_STRIDE + step * PERSON_SEED_STRIDE + k, person.grid.inside)
+            if event is not None:
+                self.log.densify_events.append({"iteration": step, "person": person.pid, **event})
+                self.prior.gaussians_changed(person)
 
 
 def people_box(union: np.ndarray, margin_px: int, min_px: int) -> tuple[int, int, int, int] | None:
