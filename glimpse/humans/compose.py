@@ -21,13 +21,10 @@ BACKGROUND_GROUP = 0
 
 
 @dataclass
-class FrameGaussians:
-    """Rasterizer inputs of one frame (N Gaussians in all) and where each person's rows are."""
+class FrameGaussians(PosedGaussians):
+    """Rasterizer inputs of one frame (N Gaussians in all: means, covariances, opacities, colours as a posed
+    person's) and where each person's rows are."""
 
-    means: Tensor  # [N, 3]
-    covariances: Tensor  # [N, 3, 3]
-    opacities: Tensor  # [N]
-    colors: Tensor  # [N, 3]
     groups: Tensor  # [N] int: 0 background, 1 + k person k (k indexes the full list of people)
     rows: dict[int, slice]  # person index k -> its rows
 

@@ -2,7 +2,7 @@
 per-stage files the Makefile depends on.
 
 Under ``OUT/<scene>/``: ``.dag.mk``, the stage DAG as make variables; and for each stage:
-  ``.params/<stage>.json``  its resolved parameters (own section + shared sections it reads)
+  ``.params/<stage>.json``  its resolved parameters (own section + the shared keys it declares)
   ``.inputs/<stage>.json``  content hashes of the scene files it reads
 Both are rewritten only when their content changes, so make reruns exactly the
 stages whose parameters or inputs changed, and their descendants.
