@@ -47,7 +47,7 @@ def render_seconds(stage_dir: Path, sfm_dir: Path) -> float:
     """Median seconds of one forward+backward render of the final background from the first input view."""
     model = GaussianModel.from_splats(read_gaussians_ply(stage_dir / "background.ply")[0])
     width, height, cameras = read_cameras_json(sfm_dir / "cameras.json")
-    camera = render_camera(cameras[min(cameras)], width, height, torch.device("cpu"))
+    camera = render_camera(cameras[min(cameras)], torch.device("cpu"))
     times = []
     for _ in range(RENDER_REPEATS):
         started = time.perf_counter()

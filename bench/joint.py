@@ -73,7 +73,7 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
     people = trained_people(run_dir)
     width, height, cameras = read_cameras_json(run_dir / "01_sfm" / "cameras.json")
     frame = min(f for f in cameras if any(p.in_frame(f) for p in people))
-    camera = render_camera(cameras[frame], width, height, torch.device("cpu"))
+    camera = render_camera(cameras[frame], torch.device("cpu"))
     times, count = [], 0
     for _ in range(RENDER_REPEATS):
         started = time.perf_counter()

@@ -112,7 +112,7 @@ def wall_camera(width: int, height: int) -> PinholeCamera:
     R = np.stack([right, np.cross(forward, right), forward])
     focal = 0.5 * height / math.tan(math.radians(SCENE_FOVY_DEG) / 2)
     K = np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
-    return PinholeCamera(K, R, -R @ position)
+    return PinholeCamera(K, R, -R @ position, width, height)
 
 
 def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) -> SpeedTiming:
@@ -126,7 +126,7 @@ def canonical_baseline(person: PersonGaussians, size: int, config: SpeedConfig) 
     total = config.warmup_frames + config.frames
     inputs = person.model.render_inputs(SH_DEGREE)
 
-    cameras = [render_camera(pinhole, size, size, device)
+    cameras = [render_camera(pinhole, device)
                for pinhole in turn_cameras(np.tile(centre, (total, 1)), config.radius_m, config.fovy_deg, size)]
 
     def draw(k: int, camera) -> int:

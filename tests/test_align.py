@@ -23,7 +23,7 @@ def test_cameras_on_a_straight_dolly_are_aligned_in_rotation_too():
     for i in range(10):
         R = Rotation.from_euler("y", 0.05 * i).as_matrix()
         centre = np.array([0.3 * i, 1.5, -2.0])  # a straight dolly
-        target[i] = PinholeCamera(K, R, -R @ centre)
+        target[i] = PinholeCamera(K, R, -R @ centre, 2, 2)
     to_sfm = Similarity(0.25, Rotation.random(random_state=3).as_matrix(), np.array([0.4, 0.1, -0.7]))
     source = {i: to_sfm.apply_to_camera(cam) for i, cam in target.items()}  # in "SfM units"
     back = align_cameras(source, target)

@@ -264,7 +264,7 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
     doc = read_json(tmp_path / "export" / "export.json")
     assert doc["frame"] == 3 and set(doc["people"]) == {"p0", "p1"}
     finished = load_finished_run(run_dir)
-    camera = render_camera(finished.cameras[3], finished.width, finished.height, torch.device("cpu"))
+    camera = render_camera(finished.cameras[3], torch.device("cpu"))
     with torch.no_grad():
         gaussians = frame_gaussians(camera, 3, finished.people, RENDER.sh_degree, finished.background, RENDER.sh_degree)
         expected = render_frame(camera, gaussians, len(finished.people), RENDER).rgb
@@ -287,7 +287,6 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
 def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_path, capsys):
     from glimpse.cli import main as cli
     from glimpse.io.video import read_mp4
-    from glimpse.replay.cameras import Shot
     from glimpse.replay.finished import load_finished_run
     from glimpse.replay.render import Edits, render_shot
 
@@ -304,7 +303,7 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
     assert len(walked) == 3 and np.abs(walked[2] - walked[0]).max() > 50
 
     finished = load_finished_run(run_dir)
-    shot, cpu = Shot(finished.cameras[3], finished.width, finished.height), torch.device("cpu")
+    shot, cpu = finished.cameras[3], torch.device("cpu")
     full = render_shot(finished, shot, 3, Edits(), cpu).astype(int)
     without_p1 = render_shot(finished, shot, 3, Edits(frozenset({"p1"})), cpu).astype(int)
     p1_alone = render_shot(finished, shot, 3, Edits(frozenset({"p0"}), background=False), cpu).max(-1) > 0
@@ -328,7 +327,7 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
     image = torch.as_tensor(np.random.default_rng(0).integers(0, 255, (64, 48, 3)), dtype=torch.uint8)
     views = [JointView(0, camera, image, torch.ones(64, 48, dtype=torch.bool), None)]
 
-    pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3))
+    pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3), 48, 64)
     visibility = body_visibility(body_model, {"p0": body}, {0: pinhole}, 48, 64, {}, JOINT.visibility)
     surface = replace(SURFACE, views_per_person=2, start_at=1000, refresh_every=2500)  # from iteration 2, every 5
 

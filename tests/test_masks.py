@@ -126,7 +126,7 @@ def test_body_layers_own_projection_and_nearest_owner():
     from glimpse.cameras.model import PinholeCamera
 
     camera = PinholeCamera(np.array([[80.0, 0, 32], [0, 80.0, 32], [0, 0, 1]]), np.diag([1.0, -1.0, -1.0]),
-                           np.array([0.0, 0.5, 4.0]))  # looking at the body's front from z = 4 m
+                           np.array([0.0, 0.5, 4.0]), 64, 64)  # looking at the body's front from z = 4 m
     near, far = rest + [0.0, 0.0, 1.0], rest + [0.2, 0.0, 0.0]
     layers = body_layers([far, near], [far[0], near[0]], model.faces.numpy(), camera, 64, 64)
     assert layers.pelvis_depth[1] < layers.pelvis_depth[0]

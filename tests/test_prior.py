@@ -218,7 +218,7 @@ def test_never_seen_pixels_cover_the_back_seen_from_behind_and_nothing_from_the_
     bodies = PosedBodies([person], visibility, body_model)
 
     def view(azimuth: float) -> ScoredView:
-        return ScoredView("v", 0, _camera(azimuth), SIZE, SIZE, None, None, {})
+        return ScoredView("v", 0, _camera(azimuth), None, None, {})
 
     from_front, from_behind = bodies.in_view(view(0.0)), bodies.in_view(view(180.0))
     assert (from_front.owner == 0).sum() > 300 and (from_behind.owner == 0).sum() > 300

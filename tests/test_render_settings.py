@@ -62,8 +62,7 @@ def test_every_render_path_hands_its_settings_to_the_rasterizer_whole(person, bo
                                   ANTIALIASED, CPU)
     timing = config_from_mapping(SpeedConfig, dict(PIPELINE["07_eval"]["speed"], frames=1, warmup_frames=0), "speed")
     speed.time_novel_pose(person, builtin_motion("walk", 2, 30.0), 32, timing, ANTIALIASED, CPU)
-    camera = render_camera(turn_cameras(box_centre(person.rig.canonical_vertices.numpy())[None], 2.6, 49.1, 32)[0],
-                           32, 32, CPU)
+    camera = render_camera(turn_cameras(box_centre(person.rig.canonical_vertices.numpy())[None], 2.6, 49.1, 32)[0], CPU)
     with torch.no_grad():
         compose.render_frame(camera, compose.frame_gaussians(camera, 0, [person], 1), 1, ANTIALIASED)
     assert len(seen_settings) == TURNTABLE["frames"] + 2 + 1 + 1
@@ -77,7 +76,7 @@ def test_the_turntable_draws_what_the_rasterizer_draws_under_the_same_settings(p
         pinhole = turn_cameras(np.tile(centre, (TURNTABLE["frames"], 1)), TURNTABLE["radius_m"],
                                TURNTABLE["fovy_deg"], TURNTABLE["size"])[1]
         with torch.no_grad():
-            direct = rasterize(render_camera(pinhole, TURNTABLE["size"], TURNTABLE["size"], CPU),
+            direct = rasterize(render_camera(pinhole, CPU),
                                **person.model.render_inputs(settings.sh_degree), background=torch.ones(3),
                                settings=settings).rgb
         assert np.array_equal(frames[1], rgb_to_uint8(direct))

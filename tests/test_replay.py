@@ -16,7 +16,7 @@ from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import GlimpseError
 from glimpse.io.cameras_json import write_cameras_json
 from glimpse.io.colmap_text import write_colmap_text
-from glimpse.replay.cameras import Shot, colmap_path, json_path, mean_up, orbit_path, turned
+from glimpse.replay.cameras import colmap_path, json_path, mean_up, orbit_path, turned
 from glimpse.replay.motion import Z_UP_TO_Y_UP, retarget
 from glimpse.replay.render import pair_shots_and_times
 
@@ -25,23 +25,23 @@ K = np.array([[100.0, 0.0, 63.5], [0.0, 100.0, 47.5], [0.0, 0.0, 1.0]])
 
 def _looking_down_z(position) -> PinholeCamera:
     """A level OpenCV camera at ``position`` looking along +z (world y down, as a static scene's frame)."""
-    return PinholeCamera(K.copy(), np.eye(3), -np.asarray(position, float))
+    return PinholeCamera(K.copy(), np.eye(3), -np.asarray(position, float), 128, 96)
 
 
 def test_an_orbit_keeps_the_centre_in_place_and_circles_the_axis():
     start = _looking_down_z([0.3, -0.2, -4.0])
     centre, axis = np.array([0.0, 0.5, 2.0]), mean_up([start])
     assert np.allclose(axis, [0.0, -1.0, 0.0])  # y down: up is -y
-    shots = orbit_path(start, 128, 96, centre, axis, 12)
+    shots = orbit_path(start, centre, axis, 12)
     pixel, depth = start.project(centre[None])
     radius = np.linalg.norm((start.centre - centre)[[0, 2]])
     for shot in shots:
-        here, here_depth = shot.camera.project(centre[None])
+        here, here_depth = shot.project(centre[None])
         assert np.allclose(here, pixel) and np.allclose(here_depth, depth)  # the people stay where they were
-        offset = shot.camera.centre - centre
+        offset = shot.centre - centre
         assert np.isclose(np.linalg.norm(offset[[0, 2]]), radius) and np.isclose(offset[1], start.centre[1] - centre[1])
-        assert np.allclose(shot.camera.R @ shot.camera.R.T, np.eye(3))
-    assert np.allclose(shots[3].camera.centre, turned(start, centre, axis, 90.0).centre)  # 30 degrees a frame
+        assert np.allclose(shot.R @ shot.R.T, np.eye(3))
+    assert np.allclose(shots[3].centre, turned(start, centre, axis, 90.0).centre)  # 30 degrees a frame
     back = turned(start, centre, axis, 360.0)
     assert np.allclose(back.R, start.R) and np.allclose(back.t, start.t)
     half = turned(start, centre, axis, 180.0)
@@ -58,20 +58,20 @@ def test_camera_lists_read_back_from_colmap_and_json(tmp_path):
         R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                       [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                       [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-        cameras[fid] = PinholeCamera(K.copy(), R, rng.normal(size=3))
+        cameras[fid] = PinholeCamera(K.copy(), R, rng.normal(size=3), 128, 96)
     write_colmap_text(tmp_path / "colmap", 128, 96, cameras, ".png")
     write_cameras_json(tmp_path / "cameras.json", 128, 96, cameras)
     for shots in (colmap_path(tmp_path / "colmap"), json_path(tmp_path / "cameras.json")):
         assert [(s.width, s.height) for s in shots] == [(128, 96)] * 3
         for shot, fid in zip(shots, sorted(cameras)):
-            assert np.allclose(shot.camera.K, K) and np.allclose(shot.camera.R, cameras[fid].R, atol=1e-9)
-            assert np.allclose(shot.camera.t, cameras[fid].t, atol=1e-9)
+            assert np.allclose(shot.K, K) and np.allclose(shot.R, cameras[fid].R, atol=1e-9)
+            assert np.allclose(shot.t, cameras[fid].t, atol=1e-9)
     with pytest.raises(GlimpseError, match="no COLMAP model"):
         colmap_path(tmp_path / "missing")
 
 
 def test_one_camera_holds_still_one_time_freezes_and_otherwise_both_advance():
-    a, b = (Shot(_looking_down_z([x, 0.0, -3.0]), 128, 96) for x in (0.0, 1.0))
+    a, b = (_looking_down_z([x, 0.0, -3.0]) for x in (0.0, 1.0))
     assert pair_shots_and_times([a], [3, 4, 5]) == [(a, 3), (a, 4), (a, 5)]
     assert pair_shots_and_times([a, b], [7]) == [(a, 7), (b, 7)]
     assert pair_shots_and_times([a, b], [1, 2]) == [(a, 1), (b, 2)]

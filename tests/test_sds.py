@@ -112,7 +112,7 @@ def test_orbit_views_are_uniform_in_azimuth_and_elevation_at_the_stated_radius(b
     assert elevations.min() >= -54 and elevations.max() <= 54 and abs(elevations.std() - 108 / math.sqrt(12)) < 2
     for view in views[:20]:
         assert np.linalg.norm(view.camera.centre - joints[0]) == pytest.approx(2.2 * 1.3)
-        assert fovy_deg(view.camera, 128) == pytest.approx(49.1)
+        assert fovy_deg(view.camera) == pytest.approx(49.1)
         assert view.camera.project(joints[:1])[0][0] == pytest.approx([63.5, 63.5])  # looking at the pelvis
 
 
@@ -127,7 +127,7 @@ def test_a_zoomed_view_fits_its_part_to_the_crop(body_model):
         assert (depth > 0).all() and offset == pytest.approx(64.0 / scale, rel=0.02)
         assert np.linalg.norm(camera.centre - 0.5 * (part.min(0) + part.max(0))) == pytest.approx(2.86)
     head = zoomed_camera(vertices[np.isin(labels, PART_JOINTS["head"])], 0.0, 2.86, 1.6, 128)
-    assert fovy_deg(head, 128) < 15.0  # a head fills the view: far narrower than the orbit's 49.1
+    assert fovy_deg(head) < 15.0  # a head fills the view: far narrower than the orbit's 49.1
 
 
 # --- prompts and the skeleton ------------------------------------------------------------------------------
@@ -244,7 +244,7 @@ def _gaussians(seed: int, offset: float) -> GaussianModel:
 
 def test_sds_gradients_reach_the_guided_persons_colours_and_positions_only(models, text):
     guided, other = _gaussians(0, 0.0), _gaussians(1, 3.0)
-    camera = render_camera(orbit_camera(np.zeros(3), 0.0, 0.0, 2.2, 49.1, 48), 48, 48, torch.device("cpu"))
+    camera = render_camera(orbit_camera(np.zeros(3), 0.0, 0.0, 2.2, 49.1, 48), torch.device("cpu"))
     rgb = rasterize(camera, **guided.render_inputs(0), background=torch.ones(3),
                     settings=RenderConfig("auto", 0, antialiased=False)).rgb  # the guided person alone
     loss, _ = sds_loss(models, rgb.permute(2, 0, 1)[None], torch.zeros(1, 3, RENDER_PX, RENDER_PX), text, 700,

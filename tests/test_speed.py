@@ -88,8 +88,7 @@ def test_the_driven_person_walks_at_the_pelvis_the_camera_circles(person):
         assert torch.linalg.norm(posed.means.mean(0) - pelvis[step]) < 0.2  # the body is around its pelvis
     assert torch.linalg.norm(pelvis[7] - pelvis[0]) > 0.05  # the walk moves forward
     size = 96
-    camera = render_camera(orbit_camera(pelvis[3].double().numpy(), 90.0, 0.0, SPEED.radius_m, SPEED.fovy_deg, size),
-                           size, size, CPU)
+    camera = render_camera(orbit_camera(pelvis[3].double().numpy(), 90.0, 0.0, SPEED.radius_m, SPEED.fovy_deg, size), CPU)
     posed = driven.posed(3, camera.centre, 0)
     alpha = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
                       colors=posed.colors, settings=RenderConfig("auto", 0, antialiased=False)).alpha

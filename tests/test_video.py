@@ -41,7 +41,8 @@ def _square(z: float, size: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_the_nearer_body_covers_the_farther_one():
-    camera = PinholeCamera(K=np.array([[50.0, 0, 32], [0, 50.0, 32], [0, 0, 1]]), R=np.eye(3), t=np.zeros(3))
+    camera = PinholeCamera(K=np.array([[50.0, 0, 32], [0, 50.0, 32], [0, 0, 1]]), R=np.eye(3), t=np.zeros(3),
+                           width=64, height=64)
     far, faces = _square(4.0, 1.0)
     near, _ = _square(2.0, 0.2)
     image = np.zeros((64, 64, 3), np.uint8)

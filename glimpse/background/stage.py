@@ -56,7 +56,7 @@ def load_views(inputs: BackgroundInputs, config: BackgroundConfig, device: torch
                                f"rerun stages 01 and 03")
         image = read_rgb(frames[fid])
         people = disk(read_mask(union_path), config.human_mask_dilate_px)
-        views.append(TrainingView(fid, render_camera(inputs.cameras[fid], inputs.width, inputs.height, device),
+        views.append(TrainingView(fid, render_camera(inputs.cameras[fid], device),
                                   torch.as_tensor(image, device=device), torch.as_tensor(~people, device=device)))
     if not views:
         raise GlimpseError("04_bg_pretrain: no frame has a camera (stage 01's cameras.json is empty)")

@@ -64,7 +64,7 @@ def judge_background(stage_dir: Path, sfm_dir: Path, scene: Path, static_camera:
     never_found, visible_unseen = [], []
     for fid, camera in sorted(cameras.items()):
         with torch.no_grad():
-            out = rasterize(render_camera(camera, width, height, torch.device("cpu")), **model.render_inputs(), settings=render)
+            out = rasterize(render_camera(camera, torch.device("cpu")), **model.render_inputs(), settings=render)
         rendered = (out.rgb.clamp(0, 1) * 255).round().numpy()
         truth = read_rgb(truth_dir / f"{frame_name(fid)}.png").astype(np.float64)
         found = read_mask(stage_dir / "never_seen" / f"{frame_name(fid)}.png")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,7 +29,7 @@ class Similarity:
         """
         R = camera.R @ self.rotation.T
         t = self.scale * camera.t - R @ self.translation
-        return PinholeCamera(K=camera.K, R=R, t=t)
+        return replace(camera, R=R, t=t)
 
 
 def umeyama(source: np.ndarray, target: np.ndarray) -> Similarity:

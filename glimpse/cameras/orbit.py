@@ -26,10 +26,9 @@ class OrbitConfig:
 
 @dataclass(frozen=True)
 class OrbitView:
-    """One orbit camera (square image of ``size`` pixels) and where it stands."""
+    """One orbit camera (a square image) and where it stands."""
 
     camera: PinholeCamera
-    size: int
     azimuth_deg: float
     elevation_deg: float
 
@@ -53,7 +52,7 @@ def orbit_camera(centre: np.ndarray, azimuth_deg: float, elevation_deg: float, r
     R = np.stack([right, down, forward])
     focal = 0.5 * size / math.tan(math.radians(fovy_deg) / 2)
     K = np.array([[focal, 0.0, (size - 1) / 2], [0.0, focal, (size - 1) / 2], [0.0, 0.0, 1.0]])
-    return PinholeCamera(K, R, -R @ position)
+    return PinholeCamera(K, R, -R @ position, size, size)
 
 
 def turn_cameras(centres: np.ndarray, radius: float, fovy_deg: float, size: int) -> list[PinholeCamera]:
@@ -70,5 +69,5 @@ def sample_orbit_views(centre: np.ndarray, count: int, config: OrbitConfig, rng:
     for _ in range(count):
         azimuth, elevation = float(rng.uniform(-180.0, 180.0)), float(rng.uniform(low, high))
         views.append(OrbitView(orbit_camera(centre, azimuth, elevation, config.radius_m, config.fovy_deg,
-                                            config.size_px), config.size_px, azimuth, elevation))
+                                            config.size_px), azimuth, elevation))
     return views

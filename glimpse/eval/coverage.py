@@ -45,7 +45,7 @@ def canonical_hole_share(person: PersonGaussians, faces: np.ndarray, config: Cov
     for pinhole in turn_cameras(np.tile(centre, (config.views, 1)), config.radius_m, config.fovy_deg, size):
         body = rasterize_triangles(points @ pinhole.R.T + pinhole.t, faces, pinhole.K, size, size).face >= 0
         inside = disk(body, config.erode_px, grow=False)
-        alpha = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(0),
+        alpha = rasterize(render_camera(pinhole, device), **person.model.render_inputs(0),
                           settings=render).alpha.reshape(size, size).cpu().numpy()
         holes += int((alpha[inside] < config.alpha_below).sum())
         pixels += int(inside.sum())

@@ -46,13 +46,13 @@ class PosedBodies:
     def in_view(self, view: ScoredView) -> ViewBodies:
         present = [k for k, p in enumerate(self.people) if p.in_frame(view.frame_id)]
         if not present:
-            empty = np.full((view.height, view.width), -1, np.int64)
-            return ViewBodies(empty, np.zeros((view.height, view.width), bool))
+            empty = np.full((view.camera.height, view.camera.width), -1, np.int64)
+            return ViewBodies(empty, np.zeros((view.camera.height, view.camera.width), bool))
         camera = view.camera
         points = [self.vertices[k][self.people[k].row_of_frame[view.frame_id]] @ camera.R.T + camera.t
                   for k in present]
         count = len(self.faces)
-        raster = rasterize_meshes(points, self.faces, camera.K, view.width, view.height)
+        raster = rasterize_meshes(points, self.faces, camera.K, camera.width, camera.height)
         covered = raster.face >= 0
         slot = np.where(covered, raster.face // count, 0)
         owner = np.where(covered, np.asarray(present)[slot], -1)

@@ -27,7 +27,7 @@ from glimpse.humans.person import PersonGaussians
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, rgb_to_uint8
 from glimpse.io.video import write_mp4
 from glimpse.render import RenderConfig, rasterize
-from glimpse.replay.cameras import Shot, mean_up, orbit_path
+from glimpse.replay.cameras import mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, people_centre, render_shot, render_video
@@ -62,7 +62,7 @@ def canonical_turntable(person: PersonGaussians, frames: int, size: int, radius_
     points = person.rig.canonical_vertices.cpu().numpy()
     centre = box_centre(points)
     for pinhole in turn_cameras(np.tile(centre, (frames, 1)), radius_m, fovy_deg, size):
-        rgb = rasterize(render_camera(pinhole, size, size, device), **person.model.render_inputs(render.sh_degree),
+        rgb = rasterize(render_camera(pinhole, device), **person.model.render_inputs(render.sh_degree),
                         background=torch.ones(3, device=device), settings=render).rgb
         yield rgb_to_uint8(rgb)
 
@@ -87,13 +87,10 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     frozen = chosen_time(config, run)
     step_fps = fps / max(config.every, 1)
 
-    def shot(t: int) -> Shot:
-        return Shot(run.cameras[t], run.width, run.height)
-
     frames = frame_files(frames_dir)
     inputs = [t for t in times if t in frames]
     if inputs:
-        write_mp4(out / "input.mp4", (side_by_side(render_shot(run, shot(t), t, Edits(), device), read_rgb(frames[t]))
+        write_mp4(out / "input.mp4", (side_by_side(render_shot(run, run.cameras[t], t, Edits(), device), read_rgb(frames[t]))
                                       for t in inputs), step_fps)
         written["input.mp4"] = "input view: render (left), input frame (right)"
     by_camera: dict[str, list[ScoredView]] = {}
@@ -101,17 +98,17 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
         by_camera.setdefault(view.name.split("/")[0], []).append(view)
     for camera, views in sorted(by_camera.items()):
         write_mp4(out / f"heldout_{camera}.mp4", (side_by_side(
-            render_shot(run, Shot(v.camera, v.width, v.height), v.frame_id, Edits(), device), read_rgb(v.image))
+            render_shot(run, v.camera, v.frame_id, Edits(), device), read_rgb(v.image))
             for v in views), step_fps)
         written[f"heldout_{camera}.mp4"] = f"held-out camera {camera}: render (left), ground truth (right)"
     if not run.people:
         return written
     axis, start = mean_up(list(run.cameras.values())), run.cameras[frozen]
     centre = people_centre(run.people, frozen)
-    orbit = orbit_path(start, run.width, run.height, centre, axis, len(times))
+    orbit = orbit_path(start, centre, axis, len(times))
     write_mp4(out / "orbit.mp4", render_video(run, list(zip(orbit, times)), Edits(), device), step_fps)
     written["orbit.mp4"] = "one turn around the people while the video plays"
-    freeze = orbit_path(start, run.width, run.height, centre, axis, config.orbit_frames)
+    freeze = orbit_path(start, centre, axis, config.orbit_frames)
     write_mp4(out / "freeze.mp4", render_video(run, [(s, frozen) for s in freeze], Edits(), device), fps)
     written["freeze.mp4"] = f"time frozen at frame {frozen}, one turn around the people"
     for person in run.people:
@@ -124,7 +121,7 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
         raise GlimpseError(f"07_eval.renders.person: no person {chosen!r} in the run (people: "
                            f"{', '.join(p.pid for p in run.people)})")
     edits = Edits(frozenset({chosen}))
-    removed = (render_shot(run, shot(t), t, edits, device) for t in times)
+    removed = (render_shot(run, run.cameras[t], t, edits, device) for t in times)
     write_mp4(out / f"removed_{chosen}.mp4", (side_by_side(image, with_never_seen(image, never_seen_dir, t))
                                               for image, t in zip(removed, times)), step_fps)
     written[f"removed_{chosen}.mp4"] = (f"input view without {chosen} (left); the same with the background no input "
@@ -133,7 +130,7 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     if person.in_frame(frozen):
         motion = motion_from_spec(config.motion, fps, config.motion_seconds)
         driven = retarget(motion, person.body, frozen, run.body_model, np.arange(len(motion)))
-        write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(shot(frozen), frozen)] * len(motion),
+        write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(run.cameras[frozen], frozen)] * len(motion),
                                                              Edits(driven={chosen: driven}), device), fps)
         written[f"motion_{chosen}.mp4"] = f"{chosen} driven by {config.motion} from frame {frozen}, scene frozen"
     return written

@@ -59,10 +59,10 @@ class EvalTables:
 def render_view(view: ScoredView, people: list[PersonGaussians], background: GaussianModel | None,
                 render: RenderConfig, device: torch.device) -> torch.Tensor:
     """[H, W, 3] in [0, 1]: the people of the view's frame (and the background when given), on black."""
-    camera = render_camera(view.camera, view.width, view.height, device)
+    camera = render_camera(view.camera, device)
     gaussians = frame_gaussians(camera, view.frame_id, people, render.sh_degree, background, render.sh_degree)
     if len(gaussians.means) == 0:
-        return torch.zeros(view.height, view.width, 3, device=device)
+        return torch.zeros(view.camera.height, view.camera.width, 3, device=device)
     return render_frame(camera, gaussians, len(people), render).rgb.clamp(0.0, 1.0)
 
 

@@ -160,7 +160,7 @@ def time_novel_pose(person: PersonGaussians, motion: BodySequence, size: int, co
     pelvis = driven.rig.rest_joints[0].cpu().double().numpy() + driven.transl.cpu().double().numpy()  # [T, 3]
     total = config.warmup_frames + config.frames
     white = torch.ones(3, device=device)
-    cameras = [render_camera(pinhole, size, size, device) for pinhole in
+    cameras = [render_camera(pinhole, device) for pinhole in
                turn_cameras(pelvis[np.arange(total) % len(motion)], config.radius_m, config.fovy_deg, size)]
 
     def pose(k: int):
@@ -180,7 +180,7 @@ def time_scene(run: FinishedRun, frame_ids: Sequence[int], warmup: int, device: 
     degree = run.render.sh_degree
     black = torch.zeros(3, device=device)
     ids = list(frame_ids)
-    cameras = {fid: render_camera(run.cameras[fid], run.width, run.height, device) for fid in ids}
+    cameras = {fid: render_camera(run.cameras[fid], device) for fid in ids}
 
     def frame(k: int) -> int:
         return ids[(k - warmup) % len(ids)]

@@ -16,14 +16,12 @@ from glimpse.scene.model import Scene
 
 @dataclass(frozen=True)
 class ScoredView:
-    """One view to score: ``name`` (camera/frame), the frame id whose poses are rendered, the camera and
-    its size, the ground truth image and the union human mask, and per-person masks where known."""
+    """One view to score: ``name`` (camera/frame), the frame id whose poses are rendered, the camera (with
+    its image size), the ground truth image and the union human mask, and per-person masks where known."""
 
     name: str
     frame_id: int
     camera: PinholeCamera
-    width: int
-    height: int
     image: Path
     union_mask: Path
     person_masks: dict[str, Path]
@@ -50,26 +48,26 @@ def heldout_views(scene: Scene, world_is_scene_frame: bool) -> list[ScoredView]:
         for fid in sorted(cam.images):
             camera = cam.camera_at(fid)
             masks = {pid: frames[fid] for pid, frames in cam.person_masks.items() if fid in frames}
-            views.append(ScoredView(f"{name}/{frame_name(fid)}", fid, camera, cam.width, cam.height, cam.images[fid],
+            views.append(ScoredView(f"{name}/{frame_name(fid)}", fid, camera, cam.images[fid],
                                     cam.union_masks[fid], masks))
     return views
 
 
-def input_views(cameras: dict[int, PinholeCamera], width: int, height: int, frames_dir: Path, masks_dir: Path,
-                pids: list[str], every: int) -> list[ScoredView]:
+def input_views(cameras: dict[int, PinholeCamera], frames_dir: Path, masks_dir: Path, pids: list[str],
+                every: int) -> list[ScoredView]:
     """Every ``every``-th input frame with a camera, with stage 03's masks as the ground-truth masks."""
     frames = frame_files(frames_dir)
     views = []
     for fid in [f for f in sorted(cameras) if f in frames][::max(every, 1)]:
         name = frame_name(fid)
         masks = {pid: path for pid in pids if (path := masks_dir / pid / f"{name}.png").is_file()}
-        views.append(ScoredView(f"input/{name}", fid, cameras[fid], width, height, frames[fid],
+        views.append(ScoredView(f"input/{name}", fid, cameras[fid], frames[fid],
                                 masks_dir / "union" / f"{name}.png", masks))
     return views
 
 
 def choose_views(config: EvalConfig, scene: Scene, world_is_scene_frame: bool, cameras: dict[int, PinholeCamera],
-                 width: int, height: int, frames_dir: Path, masks_dir: Path) -> ViewSet:
+                 frames_dir: Path, masks_dir: Path) -> ViewSet:
     """Held-out views when the scene has them and ``heldout: auto``, else the input view."""
     held = heldout_views(scene, world_is_scene_frame) if config.heldout == "auto" else []
     if held:
@@ -79,6 +77,6 @@ def choose_views(config: EvalConfig, scene: Scene, world_is_scene_frame: bool, c
     why = ("heldout: input" if config.heldout == "input" else
            "the scene has no eval/ cameras" if not scene.eval_cameras else
            "eval/ cameras are in the scene's frame, but stage 01 rebuilt the world by structure from motion")
-    views = input_views(cameras, width, height, frames_dir, masks_dir, sorted(scene.humans), config.input_view_every)
+    views = input_views(cameras, frames_dir, masks_dir, sorted(scene.humans), config.input_view_every)
     return ViewSet("input", f"the INPUT view ({why}): every {config.input_view_every}th input frame, masks from "
                             f"stage 03. These numbers measure the fit to seen frames, not novel views", views)

@@ -46,5 +46,6 @@ def read_cameras_json(path: Path) -> tuple[int, int, dict[int, PinholeCamera]]:
             K=np.asarray(entry.get("K", K), dtype=np.float64),
             R=np.asarray(entry["R"], dtype=np.float64),
             t=np.asarray(entry["t"], dtype=np.float64),
+            width=int(doc["width"]), height=int(doc["height"]),
         )
     return int(doc["width"]), int(doc["height"]), cameras

@@ -81,7 +81,7 @@ def load_views(inputs: JointInputs, config: JointConfig, device: torch.device) -
                      if (path := inputs.occluders_dir / pid / f"{name}.png").is_file()]
         keep = ~static_occlusion(union, occluders)
         box = people_box(union, config.loss.lpips_margin_px, config.loss.lpips_min_px)
-        views.append(JointView(fid, render_camera(inputs.cameras[fid], inputs.width, inputs.height, device),
+        views.append(JointView(fid, render_camera(inputs.cameras[fid], device),
                                torch.as_tensor(read_rgb(frames[fid]), device=device),
                                torch.as_tensor(keep, device=device), box))
     if not views:

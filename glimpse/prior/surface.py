@@ -108,9 +108,9 @@ class SurfacePrior(UnseenPrior):
         views = []
         for view in sample_orbit_views(centre, self.config.views_per_person, orbit, rng):
             cam = view.camera
-            body = rasterize_triangles(points @ cam.R.T + cam.t, faces, cam.K, view.size, view.size).face >= 0
+            body = rasterize_triangles(points @ cam.R.T + cam.t, faces, cam.K, cam.width, cam.height).face >= 0
             views.append(SilhouetteView(
-                render_camera(cam, view.size, view.size, device),
+                render_camera(cam, device),
                 torch.as_tensor(disk(body, margin_px, grow=False), device=device),
                 torch.as_tensor(~disk(body, margin_px, grow=True), device=device)))
         return views

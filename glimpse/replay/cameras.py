@@ -10,7 +10,7 @@ assumes the world's up axis).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,15 +22,6 @@ from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
 
 PINHOLE_MODELS = ("SIMPLE_PINHOLE", "PINHOLE")  # COLMAP params: (f, cx, cy) and (fx, fy, cx, cy)
-
-
-@dataclass(frozen=True)
-class Shot:
-    """One camera of a path and its image size in pixels."""
-
-    camera: PinholeCamera
-    width: int
-    height: int
 
 
 def mean_up(cameras: list[PinholeCamera]) -> np.ndarray:
@@ -47,26 +38,26 @@ def turned(camera: PinholeCamera, centre: np.ndarray, axis: np.ndarray, degrees:
     world seen by the new camera is the old one's turned back by the same angle."""
     turn = Rotation.from_rotvec(np.radians(degrees) * axis).as_matrix()
     R = camera.R @ turn.T
-    return PinholeCamera(camera.K.copy(), R, camera.t + camera.R @ centre - R @ centre)
+    return replace(camera, K=camera.K.copy(), R=R, t=camera.t + camera.R @ centre - R @ centre)
 
 
-def orbit_path(start: PinholeCamera, width: int, height: int, centre: np.ndarray, axis: np.ndarray, count: int,
-               degrees: float = 360.0) -> list[Shot]:
-    """``count`` shots turning ``start`` by ``degrees`` in all about the axis through ``centre`` (the last
+def orbit_path(start: PinholeCamera, centre: np.ndarray, axis: np.ndarray, count: int,
+               degrees: float = 360.0) -> list[PinholeCamera]:
+    """``count`` cameras turning ``start`` by ``degrees`` in all about the axis through ``centre`` (the last
     shot stops one step short of a full circle, so a looped video does not repeat a frame)."""
     if count < 1:
         raise GlimpseError(f"an orbit needs at least one frame, got {count}")
     step = degrees / count if math.isclose(abs(degrees), 360.0) else degrees / max(count - 1, 1)
-    return [Shot(turned(start, centre, axis, k * step), width, height) for k in range(count)]
+    return [turned(start, centre, axis, k * step) for k in range(count)]
 
 
-def json_path(path: Path) -> list[Shot]:
+def json_path(path: Path) -> list[PinholeCamera]:
     """Every camera of a Glimpse cameras.json (stage 01's format), in frame order."""
-    width, height, cameras = read_cameras_json(path)
-    return [Shot(cameras[fid], width, height) for fid in sorted(cameras)]
+    _, _, cameras = read_cameras_json(path)
+    return [cameras[fid] for fid in sorted(cameras)]
 
 
-def colmap_path(folder: Path) -> list[Shot]:
+def colmap_path(folder: Path) -> list[PinholeCamera]:
     """Every image of a COLMAP model (text or binary), in name order; pinhole camera models only."""
     import pycolmap
 
@@ -83,8 +74,8 @@ def colmap_path(folder: Path) -> list[Shot]:
         fx, fy, cx, cy = (params[0], *params) if camera.model.name == "SIMPLE_PINHOLE" else params
         K = np.array([[fx, 0.0, cx - COLMAP_PIXEL_OFFSET], [0.0, fy, cy - COLMAP_PIXEL_OFFSET], [0.0, 0.0, 1.0]])
         pose = image.cam_from_world()
-        shots.append(Shot(PinholeCamera(K, pose.rotation.matrix(), np.asarray(pose.translation)),
-                          camera.width, camera.height))
+        shots.append(PinholeCamera(K, pose.rotation.matrix(), np.asarray(pose.translation), camera.width,
+                                   camera.height))
     if not shots:
         raise GlimpseError(f"{folder}: the COLMAP model has no image")
     return shots

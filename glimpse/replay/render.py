@@ -10,12 +10,11 @@ import numpy as np
 import torch
 
 from glimpse.body.params import BodyParams
-from glimpse.cameras.model import render_camera
+from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.humans.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.io.images import rgb_to_uint8
-from glimpse.replay.cameras import Shot
 from glimpse.replay.finished import FinishedRun
 
 
@@ -57,7 +56,7 @@ def people_centre(people: Sequence[PersonGaussians], frame_id: int) -> np.ndarra
     return np.mean(every, axis=0)
 
 
-def pair_shots_and_times(shots: Sequence[Shot], times: Sequence[int]) -> list[tuple[Shot, int]]:
+def pair_shots_and_times(shots: Sequence[PinholeCamera], times: Sequence[int]) -> list[tuple[PinholeCamera, int]]:
     """One (shot, frame id) per video frame: a single shot holds still over the times, a single time is frozen
     along the shots, otherwise both advance together and must have the same length."""
     if not shots or not times:
@@ -90,11 +89,11 @@ def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) ->
 
 
 @torch.no_grad()
-def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, device: torch.device,
+def render_shot(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edits, device: torch.device,
                 video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
     """[H, W, 3] uint8: the scene at ``frame_id`` from ``shot`` (black where nothing is drawn), the ``driven``
     people (driven_people) at their motion's ``video_index``."""
-    camera = render_camera(shot.camera, shot.width, shot.height, device)
+    camera = render_camera(shot, device)
     people = [p for p in run.people if p.pid not in edits.removed and p.pid not in edits.driven]
     background = run.background if edits.background else None
     degree = run.render.sh_degree
@@ -105,7 +104,7 @@ def render_shot(run: FinishedRun, shot: Shot, frame_id: int, edits: Edits, devic
     return rgb_to_uint8(rgb)
 
 
-def render_video(run: FinishedRun, frames: Sequence[tuple[Shot, int]], edits: Edits, device: torch.device
+def render_video(run: FinishedRun, frames: Sequence[tuple[PinholeCamera, int]], edits: Edits, device: torch.device
                  ) -> Iterator[np.ndarray]:
     """The frames of a video, one render per (shot, frame id); driven people follow the video's index."""
     edits.check(run)

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
-from glimpse.replay.cameras import Shot, colmap_path, json_path, mean_up, orbit_path
+from glimpse.replay.cameras import colmap_path, json_path, mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.render import people_centre
 
@@ -37,15 +38,15 @@ def parse_times(spec: str, run: FinishedRun) -> list[int]:
 
 
 def camera_shots(spec: str, run: FinishedRun, times: list[int], orbit_frames: int, scene: Path | None
-                 ) -> list[Shot]:
+                 ) -> list[PinholeCamera]:
     """The camera path named by ``spec`` (see the module's docstring)."""
     kind, _, argument = spec.partition(":")
     if kind == "input":
-        return [Shot(run.cameras[t], run.width, run.height) for t in times]
+        return [run.cameras[t] for t in times]
     if kind == "orbit":
         degrees = float(argument) if argument else 360.0
         count = len(times) if len(times) > 1 else orbit_frames
-        return orbit_path(run.cameras[times[0]], run.width, run.height, people_centre(run.people, times[0]),
+        return orbit_path(run.cameras[times[0]], people_centre(run.people, times[0]),
                           mean_up(list(run.cameras.values())), count, degrees)
     if kind == "heldout":
         return heldout_shots(scene, argument, times)
@@ -56,7 +57,7 @@ def camera_shots(spec: str, run: FinishedRun, times: list[int], orbit_frames: in
     raise GlimpseError(f"--camera {spec!r}: the kinds are {', '.join(CAMERA_KINDS)}")
 
 
-def heldout_shots(scene: Path | None, name: str, times: list[int]) -> list[Shot]:
+def heldout_shots(scene: Path | None, name: str, times: list[int]) -> list[PinholeCamera]:
     """A held-out camera of the scene's eval/: its pose at each time where it moves, else its one pose."""
     from glimpse.scene import load_scene
 
@@ -67,5 +68,5 @@ def heldout_shots(scene: Path | None, name: str, times: list[int]) -> list[Shot]
         raise GlimpseError(f"{scene / 'eval'}: no held-out camera {name!r} (there are: "
                            f"{', '.join(sorted(cameras)) or 'none'})")
     cam = cameras[name]
-    shots = [Shot(cam.camera_at(t), cam.width, cam.height) for t in times]
+    shots = [cam.camera_at(t) for t in times]
     return shots if any(cam.poses.get(t) for t in times) else shots[:1]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.cameras.model import PinholeCamera
+from glimpse.cameras.model import PinholeCamera, camera_from_pose
 
 __all__ = [
     "CAMERAS_FORMAT",
@@ -106,8 +106,9 @@ class EvalCamera:
     def camera_at(self, frame_id: int) -> PinholeCamera:
         """The camera at ``frame_id``: its per-frame pose (and intrinsics) where given, else its one pose."""
         pose = self.poses.get(frame_id)
-        K = pose.K if pose is not None and pose.K is not None else self.K
-        return PinholeCamera(K, pose.R if pose else self.R, pose.t if pose else self.t)
+        if pose is None:
+            return PinholeCamera(self.K, self.R, self.t, self.width, self.height)
+        return camera_from_pose(self.K, pose.R, pose.t, self.width, self.height, pose.K)
 
 
 @dataclass(frozen=True)

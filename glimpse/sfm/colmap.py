@@ -150,10 +150,12 @@ def _result_from_reconstruction(rec: pycolmap.Reconstruction, num_models: int, t
             continue
         fid = frame_id_of(image.name)
         pose = image.cam_from_world()
+        camera = rec.cameras[image.camera_id]
         cameras[fid] = PinholeCamera(
-            K=_camera_K(rec.cameras[image.camera_id]),
+            K=_camera_K(camera),
             R=np.asarray(pose.rotation.matrix(), dtype=np.float64),
             t=np.asarray(pose.translation, dtype=np.float64),
+            width=int(camera.width), height=int(camera.height),
         )
     points = list(rec.points3D.values())
     xyz = np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3)

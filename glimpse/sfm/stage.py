@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.cameras.align import align_cameras
-from glimpse.cameras.model import PinholeCamera, default_intrinsics
+from glimpse.cameras.model import PinholeCamera, camera_from_pose, default_intrinsics
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name
@@ -65,10 +65,9 @@ class CamerasOutcome:
 def _given_poses(scene: Scene) -> dict[int, PinholeCamera]:
     if scene.cameras is None:
         return {}
-    return {
-        fid: PinholeCamera(K=pose.K if pose.K is not None else scene.cameras.K, R=pose.R, t=pose.t)
-        for fid, pose in scene.cameras.poses.items()
-    }
+    given = scene.cameras
+    return {fid: camera_from_pose(given.K, pose.R, pose.t, given.width, given.height, pose.K)
+            for fid, pose in given.poses.items()}
 
 
 def _is_static(cameras: dict[int, PinholeCamera], tolerance_m: float) -> bool:
@@ -141,7 +140,7 @@ def estimate_cameras(
 
     if mode == "static":
         K = K_input if K_input is not None else default_intrinsics(scene.width, scene.height, config.static_fov_deg)
-        cameras = {fid: PinholeCamera(K=K, R=np.eye(3), t=np.zeros(3)) for fid in frame_ids}
+        cameras = {fid: PinholeCamera(K, np.eye(3), np.zeros(3), scene.width, scene.height) for fid in frame_ids}
         return CamerasOutcome(mode, reason, "static", cameras=cameras, units="metres", motion=motion,
                               warnings=warnings, **outcome_args)
 

@@ -57,7 +57,7 @@ def run(ctx: StageContext) -> None:
     width, height, cameras = read_cameras_json(sfm / "cameras.json")
     sfm_report = json.loads((sfm / "report.json").read_text())
     world_is_scene_frame = sfm_report.get("mode") != "sfm" or scene.cameras is not None
-    view_set = choose_views(config, scene, world_is_scene_frame, cameras, width, height, sfm / "frames",
+    view_set = choose_views(config, scene, world_is_scene_frame, cameras, sfm / "frames",
                             masks / "masks")
     if not view_set.views:
         raise GlimpseError(f"07_eval: no view to score (no eval/ image and no input frame with a camera in {sfm})")

@@ -17,7 +17,7 @@ canonical only: supplementary), then with ``late`` ones (0.2 each).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -50,11 +50,10 @@ class SDSCameraConfig:
 
 @dataclass(frozen=True)
 class SDSView:
-    """One sampled SDS camera: its kind, the camera (square, ``size`` pixels), where it stands."""
+    """One sampled SDS camera: its kind, the camera (a square image), where it stands."""
 
     kind: str
     camera: PinholeCamera
-    size: int
     azimuth_deg: float
     elevation_deg: float
 
@@ -78,7 +77,7 @@ def zoomed_camera(points: np.ndarray, azimuth_deg: float, radius: float, crop_sc
     focal = 0.5 * size / max(half, MIN_HALF_EXTENT)
     K = camera.K.copy()
     K[0, 0] = K[1, 1] = focal
-    return PinholeCamera(K, camera.R, camera.t)
+    return replace(camera, K=K)
 
 
 def sample_view(kind: str, config: SDSCameraConfig, vertices: np.ndarray, labels: np.ndarray, pelvis: np.ndarray,
@@ -90,13 +89,13 @@ def sample_view(kind: str, config: SDSCameraConfig, vertices: np.ndarray, labels
     if kind in ZOOMED:
         part = vertices[np.isin(labels, PART_JOINTS[kind])]
         camera = zoomed_camera(part, azimuth, config.zoom_radius_m * scale, config.zoom_scale[kind], size)
-        return SDSView(kind, camera, size, azimuth, 0.0)
+        return SDSView(kind, camera, azimuth, 0.0)
     low, high = config.elevation_deg
     elevation = float(rng.uniform(low, high))
     camera = orbit_camera(pelvis, azimuth, elevation, config.radius_m * scale, config.fovy_deg, size)
-    return SDSView(kind, camera, size, azimuth, elevation)
+    return SDSView(kind, camera, azimuth, elevation)
 
 
-def fovy_deg(camera: PinholeCamera, size: int) -> float:
-    """The vertical field of view of a square camera of ``size`` pixels, degrees."""
-    return math.degrees(2.0 * math.atan(0.5 * size / camera.K[1, 1]))
+def fovy_deg(camera: PinholeCamera) -> float:
+    """The vertical field of view of ``camera``, degrees."""
+    return math.degrees(2.0 * math.atan(0.5 * camera.height / camera.K[1, 1]))

@@ -139,12 +139,12 @@ class SDSPrior(UnseenPrior):
         vertices, joints = posed_body(person, transforms, self.skin_weights)
         size = config.early_resolution_px if sds_step < self.early_steps else config.resolution_px
         view = sample_view(kind, self.cameras, vertices, self.labels, joints[PELVIS], 1.0, size, rng)
-        camera = render_camera(view.camera, size, size, self.device)
+        camera = render_camera(view.camera, self.device)
         posed = person.posed_with(transforms, camera.centre, self.render.sh_degree)
         background = torch.as_tensor(rng.random(3), dtype=torch.float32, device=self.device)
         render = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
                            colors=posed.colors, background=background, settings=self.render)
-        skeleton = self._skeleton(vertices, joints, view.camera, size)
+        skeleton = self._skeleton(vertices, joints, view.camera)
         prompt_view = view_word(view.azimuth_deg, config.prompt.front_max_deg, config.prompt.back_min_deg)
         timestep = sample_timestep(sds_step, self.timesteps, self.models.train_timesteps, generator)
         self.switch.use(self.identities[person.pid])
@@ -166,16 +166,12 @@ class SDSPrior(UnseenPrior):
                  F.interpolate(skeleton.float(), size=size, mode="nearest"), guess.float()]
         write_png(path, rgb_to_uint8(torch.cat(tiles, dim=-1)[0].permute(1, 2, 0)))
 
-    def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera, size: int) -> Tensor:
-        """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera`` (``size``)."""
+    def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera) -> Tensor:
+        """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera``."""
         resolution = self.config.resolution_px
-        factor = resolution / size
-        K = camera.K.copy()
-        K[:2] *= factor
-        K[:2, 2] = (camera.K[:2, 2] + 0.5) * factor - 0.5  # pixel centres stay pixel centres
         with torch.no_grad():
             keypoints = self.keypoints(torch.as_tensor(joints[None]), torch.as_tensor(vertices[None]))[0].numpy()
-        image, _, _ = skeleton_image(keypoints, joints[HEAD_JOINT], PinholeCamera(K, camera.R, camera.t), resolution,
+        image, _, _ = skeleton_image(keypoints, joints[HEAD_JOINT], camera.resized(resolution, resolution), resolution,
                                      self.config.skeleton_line_px)
         return unit_image(image)[None].to(self.device)
 
