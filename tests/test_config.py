@@ -1,6 +1,7 @@
 """pipeline.yaml, overrides and typed configs."""
 
 import dataclasses
+import fnmatch
 import re
 from typing import Literal
 
@@ -32,16 +33,17 @@ def test_every_parameter_line_has_a_comment():
 
 def test_every_key_a_stage_declares_it_reads_is_a_shared_parameter():
     defaults = load_pipeline_yaml()
-    for name in SHARED_SECTIONS:
-        assert name in defaults
+    for pattern in SHARED_SECTIONS:
+        assert fnmatch.filter(defaults, pattern), pattern
     for spec in STAGES:
         for key in spec.reads:
-            section, *path = key.split(".")
-            assert section in SHARED_SECTIONS, (spec.name, key)
-            node = defaults[section]
-            for part in path:
-                assert isinstance(node, dict) and part in node, (spec.name, key)
-                node = node[part]
+            pattern, *path = key.split(".")
+            assert pattern in SHARED_SECTIONS, (spec.name, key)
+            for section in fnmatch.filter(defaults, pattern):
+                node = defaults[section]
+                for part in path:
+                    assert isinstance(node, dict) and part in node, (spec.name, key)
+                    node = node[part]
 
 
 def test_every_prior_owns_a_section_that_stage_06_declares():
@@ -52,7 +54,8 @@ def test_every_prior_owns_a_section_that_stage_06_declares():
     for prior in PRIORS.values():
         if prior.section is not None:
             assert SECTION_CONFIGS[prior.section] is prior.config_class
-            assert prior.section in SHARED_SECTIONS and joint.declares(prior.section), prior.name
+            assert any(fnmatch.fnmatchcase(prior.section, pattern) for pattern in SHARED_SECTIONS), prior.name
+            assert joint.declares(prior.section), prior.name
 
 
 def test_cli_params_are_parsed_as_yaml():

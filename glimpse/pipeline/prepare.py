@@ -174,14 +174,15 @@ def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
     declares (nested as in pipeline.yaml)."""
     recorded: dict[str, Any] = {}
     for key in spec.reads:
-        section, *path = key.split(".")
-        source, target = params[section], recorded.setdefault(section, {})
-        for part in path[:-1]:
-            source, target = source[part], target.setdefault(part, {})
-        if path:
-            target[path[-1]] = source[path[-1]]
-        else:
-            recorded[section] = params[section]
+        pattern, *path = key.split(".")
+        for section in sorted(fnmatch.filter(params, pattern)):
+            source, target = params[section], recorded.setdefault(section, {})
+            for part in path[:-1]:
+                source, target = source[part], target.setdefault(part, {})
+            if path:
+                target[path[-1]] = source[path[-1]]
+            else:
+                recorded[section] = params[section]
     recorded[spec.name] = params.get(spec.name, {})
     return recorded
 

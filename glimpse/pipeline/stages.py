@@ -5,6 +5,7 @@ prepare`` writes make's prerequisites from ``upstream`` (``make print-dag`` prin
 
 from __future__ import annotations
 
+import fnmatch
 from dataclasses import dataclass
 
 
@@ -15,7 +16,8 @@ class StageSpec:
     name:          folder name under ``stages/`` and under ``OUT/<scene>/``.
     upstream:      stages whose outputs this one reads (their manifests are make prerequisites).
     reads:         the keys of shared pipeline.yaml sections the stage reads, dotted (``body.skinning``
-                   stands for every key under it). Only these, and the stage's own section, go into
+                   stands for every key under it; a section may be a pattern: ``prior_*`` is every
+                   prior's own section). Only these, and the stage's own section, go into
                    its .params file, so a change reruns exactly the stages that read it; the runner
                    refuses to publish a stage that read a shared key it does not declare.
     scene_inputs:  glob patterns, relative to the scene root, of the scene files it reads;
@@ -29,7 +31,13 @@ class StageSpec:
 
     def declares(self, key: str) -> bool:
         """Whether the dotted shared ``key`` is among (or under) what the stage declares it reads."""
-        return any(key == declared or key.startswith(declared + ".") for declared in self.reads)
+        section, _, path = key.partition(".")
+        for declared in self.reads:
+            declared_section, _, declared_path = declared.partition(".")
+            if fnmatch.fnmatchcase(section, declared_section) and (
+                    not declared_path or path == declared_path or path.startswith(declared_path + ".")):
+                return True
+        return False
 
 
 _PERSON_2D = ("humans/*/masks/*.png", "humans/*/keypoints2d.npz")
@@ -69,7 +77,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "06_joint_opt",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"),
-        reads=("compute", "body", "render", "prior.kind", "prior_surface", "diffusion"),
+        reads=("compute", "body", "render", "prior.kind", "prior_*", "diffusion"),
         scene_inputs=(),
     ),
     StageSpec(
@@ -81,7 +89,8 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_surface", "diffusion")
+# The shared sections of pipeline.yaml (patterns): every other section is one stage's own.
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_*", "diffusion")
 
 
 def dag_makefile(stages: tuple[StageSpec, ...] = STAGES) -> str:
