@@ -5,6 +5,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
 SCENE  ?=
+VIDEO  ?=
 OUT    ?= runs
 PARAMS ?=
 STAGE  ?=
@@ -26,14 +27,24 @@ ifneq ($(PIPELINE_YAML),)
 export GLIMPSE_PIPELINE_YAML := $(abspath $(PIPELINE_YAML))
 endif
 
+# BlazePose's models for the ingest, taken out of the mediapipe wheel by `make models`.
+MODELS_DIR ?= models/blazepose
+# A video given with VIDEO= becomes the scene folder SCENE (default: OUT/scenes/<video name>) before the stages.
+ifneq ($(VIDEO),)
+$(if $(wildcard $(VIDEO)),,$(error VIDEO=$(VIDEO): no such file))
+SCENE := $(if $(SCENE),$(SCENE),$(OUT)/scenes/$(basename $(notdir $(VIDEO))))
+endif
+
 # The stages are the folders of stages/ (a test checks they are the registry's).
 STAGES := $(sort $(patsubst stages/%/run.py,%,$(wildcard stages/*/run.py)))
 PIPELINE := $(MAKE) --no-print-directory -f mk/pipeline.mk PY=$(abspath $(PY)) OUT=$(OUT) STAGES_DIR=$(STAGES_DIR)
 
-.PHONY: help venv all validate test bench demo clean-stage print-dag free-body $(STAGES)
+.PHONY: help venv models ingest all validate test bench demo clean-stage print-dag free-body $(STAGES)
 
 help:
 	@echo "make demo                      set up, generate the demo scene, run the pipeline on it"
+	@echo "make all VIDEO=clip.mp4        ingest the video into a scene (OUT/scenes/clip), then run every stage"
+	@echo "make ingest VIDEO=clip.mp4 [SCENE=dir]  only the scene: people found, tracked, a preview to check"
 	@echo "make all SCENE=dir             run every stage that is out of date"
 	@echo "make <stage> SCENE=dir         rerun one stage ($(STAGES))"
 	@echo "make validate SCENE=dir        check a scene against docs/SCENE_FORMAT.md"
@@ -53,11 +64,27 @@ $(VENV)/.installed-test: $(VENV)/.installed requirements-test.txt
 	$(PY) -m pip install --quiet -c $(CONSTRAINTS) -r requirements-test.txt
 	touch $@
 
-need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene is required))
+$(MODELS_DIR)/.installed: tools/install_blazepose.py | $(VENV)/.installed
+	$(PY) tools/install_blazepose.py $(MODELS_DIR)
 
-all: venv
+models: $(MODELS_DIR)/.installed
+
+need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene (or VIDEO=clip.mp4) is required))
+need-video = $(if $(VIDEO),,$(error VIDEO=path/to/video is required))
+
+# The scene of a video, ingested again only when the video is newer (make ingest forces it).
+ifneq ($(VIDEO),)
+$(SCENE)/scene.yaml: $(VIDEO) | venv models
+	$(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)" --params "$(PARAMS)"
+endif
+
+ingest: venv models
+	$(need-video)
+	$(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)" --params "$(PARAMS)"
+
+all: venv $(if $(VIDEO),$(SCENE)/scene.yaml)
 	$(need-scene)
-	@run=$$($(PY) -m glimpse prepare --scene "$(SCENE)" --out "$(OUT)") && \
+	@run=$$($(PY) -m glimpse prepare --whole-pipeline --scene "$(SCENE)" --out "$(OUT)") && \
 	  $(PIPELINE) SCENE="$(SCENE)" RUN="$$run" all
 
 # `make <stage>`: rerun that stage (-W pretends its parameters changed), building missing or stale prerequisites.
@@ -79,7 +106,7 @@ clean-stage: venv
 print-dag: venv
 	@$(PY) -m glimpse.pipeline.stages
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test $(MODELS_DIR)/.installed
 	$(VENV)/bin/lint-imports --no-cache
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 

@@ -1,7 +1,10 @@
 """``python -m glimpse`` / ``glimpse``: the commands the Makefile and users call.
 
+  glimpse ingest VIDEO SCENE_DIR         a video -> a scene: frames, every person found and tracked (keypoints,
+                                         masks), a preview video and a tracks report (docs/ingest.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
-  glimpse prepare --scene S --out O      validate, resolve parameters, write .params/.inputs; print the run folder
+  glimpse prepare --scene S --out O [--whole-pipeline]
+                                         validate, resolve parameters, write .params/.inputs; print the run folder
   glimpse params --scene S --stage X     print the resolved parameters one stage reads
   glimpse run-dir --scene S --out O      print OUT/<scene name> without preparing
   glimpse export RUN [--frame T] [--out DIR] [--sh-degree D]
@@ -31,6 +34,10 @@ def _params_default() -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="glimpse", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
+    p_ingest = sub.add_parser("ingest", help="a video -> a glimpse-scene/1 folder (docs/ingest.md)")
+    p_ingest.add_argument("video", type=Path)
+    p_ingest.add_argument("scene", type=Path, help="the scene folder to write (replaced when the ingest succeeds)")
+    p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
     p_val = sub.add_parser("validate", help="check a scene folder against glimpse-scene/1")
     p_val.add_argument("scene", type=Path)
     for name in ("prepare", "params", "run-dir"):
@@ -40,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
         if name == "params":
             p.add_argument("--stage", required=True)
+        if name == "prepare":
+            p.add_argument("--whole-pipeline", action="store_true",
+                           help="also refuse a scene the pipeline cannot run to the end (make all)")
     p_export = sub.add_parser("export", help="a finished run's Gaussians and cameras for other tools")
     p_export.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
     p_export.add_argument("--frame", type=int, default=None, help="input frame id (default: the middle one)")
@@ -73,16 +83,25 @@ def main(argv: list[str] | None = None) -> int:
 def _dispatch(args: argparse.Namespace) -> int:
     from glimpse.pipeline.prepare import prepare_run, scene_name
 
+    if args.command == "ingest":
+        from glimpse.ingest.config import load_ingest_config
+        from glimpse.ingest.stage import ingest
+
+        ingest(args.video, args.scene, load_ingest_config(args.params))
+        return 0
     if args.command == "validate":
         from glimpse.errors import SceneError
         from glimpse.scene import validate_scene
 
         if not args.scene.is_dir():
             raise GlimpseError(f"{args.scene}: no such scene folder")
+        from glimpse.scene.runnable import check_runnable
+
         violations = validate_scene(args.scene)
         if violations:
             raise SceneError(str(args.scene), violations)
-        print(f"{args.scene}: valid glimpse-scene/1")
+        check_runnable(args.scene)
+        print(f"{args.scene}: valid glimpse-scene/1, and the pipeline can run it")
         return 0
     if args.command == "export":
         from glimpse.export.run import export_run
@@ -111,7 +130,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             stage_spec(args.stage)
         except ValueError as exc:
             raise GlimpseError(str(exc)) from None
-    run, _ = prepare_run(args.scene, args.out, args.params)
+    run, _ = prepare_run(args.scene, args.out, args.params, getattr(args, "whole_pipeline", False))
     if args.command == "prepare":
         print(run.root)
     else:

@@ -41,3 +41,17 @@ class SceneError(GlimpseError):
 
 class ConfigError(GlimpseError):
     """A parameter is unknown, mistyped or out of range."""
+
+
+class SceneNotRunnable(GlimpseError):
+    """A scene that is valid glimpse-scene/1 but that the pipeline cannot run; lists what is missing."""
+
+    def __init__(self, scene_root: str, violations: list[Violation]):
+        self.scene_root = scene_root
+        self.violations = list(violations)
+        lines = [f"scene {scene_root} is valid glimpse-scene/1, but the pipeline cannot run it "
+                 f"({len(self.violations)} problem(s)):"]
+        lines += [f"  - {v}" for v in self.violations]
+        lines.append(("  (a video with nothing else becomes a scene the pipeline can run with "
+                      "`glimpse ingest VIDEO SCENE_DIR`, or `make all VIDEO=clip.mp4`; docs/ingest.md)"))
+        super().__init__("\n".join(lines))

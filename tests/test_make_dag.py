@@ -45,6 +45,8 @@ def write_tiny_scene(root: Path) -> None:
     rng = np.random.default_rng(0)
     for i in range(3):
         scene.frame(i, rng.integers(0, 255, (12, 16, 3), dtype=np.uint8))
+    keypoints = np.concatenate([rng.uniform(0, 12, (3, 17, 2)), np.ones((3, 17, 1))], axis=2)
+    scene.keypoints2d("p0", np.arange(3), "coco17", keypoints)  # the pipeline runs only scenes with people
     scene.finish()
 
 

@@ -1,5 +1,6 @@
-"""H.264 MP4 videos through imageio-ffmpeg (its bundled ffmpeg binary is GPL and runs as a
-separate process; docs/licences.md).
+"""Videos. Writing: H.264 MP4 through imageio-ffmpeg (its bundled ffmpeg binary is GPL and runs as a
+separate process; docs/licences.md). Reading: OpenCV's FFmpeg backend (LGPL libraries in OpenCV's wheel), which
+applies the container's display rotation and reports each frame's presentation time.
 
 Frames are RGB uint8 [H, W, 3]. H.264 with yuv420p needs even sizes: odd frames are padded by
 one black row or column at the bottom or right (never scaled, so pixels keep their place).
@@ -7,10 +8,14 @@ one black row or column at the bottom or right (never scaled, so pixels keep the
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
+
+from glimpse.errors import GlimpseError
 
 VIDEO_CODEC = "libx264"
 VIDEO_QUALITY = 8  # imageio-ffmpeg's 0-10 scale (10 = best); 8 keeps keypoint dots and edges crisp
@@ -60,3 +65,70 @@ def read_mp4(path: str | Path) -> np.ndarray:
     meta = next(reader)
     width, height = meta["size"]
     return np.stack([np.frombuffer(f, np.uint8).reshape(height, width, 3) for f in reader])
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """What the container says about a video (sizes after its display rotation)."""
+
+    path: Path
+    width: int
+    height: int
+    frame_count: int  # the container's count (may be an estimate; decoding decides)
+    fps: float  # the container's nominal rate
+    rotation_deg: float  # the display rotation OpenCV applied (0, 90, 180, 270)
+
+
+def _open_capture(path: Path) -> cv2.VideoCapture:
+    if not path.is_file():
+        raise GlimpseError(f"{path}: no such video file")
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        capture.release()
+        raise GlimpseError(f"{path}: not a readable video (not a video file, an unsupported codec, or a file "
+                           "truncated before its index); re-encode it, e.g. ffmpeg -i IN -c:v libx264 OUT.mp4")
+    capture.set(cv2.CAP_PROP_ORIENTATION_AUTO, 1)
+    return capture
+
+
+def probe_video(path: str | Path) -> VideoInfo:
+    """The container's facts about ``path``; GlimpseError when it cannot be read as a video."""
+    path = Path(path)
+    capture = _open_capture(path)
+    try:
+        ok, bgr = capture.read()
+        if not ok:
+            raise GlimpseError(f"{path}: the video has no decodable frame")
+        return VideoInfo(path, bgr.shape[1], bgr.shape[0], int(max(capture.get(cv2.CAP_PROP_FRAME_COUNT), 0)),
+                         float(capture.get(cv2.CAP_PROP_FPS) or 0.0),
+                         float(capture.get(cv2.CAP_PROP_ORIENTATION_META) or 0.0))
+    finally:
+        capture.release()
+
+
+def resized(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``rgb`` [H, W, C] resized to ``size`` (width, height) with the area filter; itself when already that size."""
+    if (rgb.shape[1], rgb.shape[0]) == tuple(size):
+        return rgb
+    return cv2.resize(rgb, tuple(size), interpolation=cv2.INTER_AREA)
+
+
+def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterator[tuple[int, float, np.ndarray]]:
+    """Decode ``path`` frame by frame (streaming: one frame in memory at a time), display rotation applied.
+    Yields (decode index, presentation time in seconds, [H, W, 3] uint8 RGB, resized to ``size`` (width, height)
+    with the area filter when given)."""
+    path = Path(path)
+    capture = _open_capture(path)
+    try:
+        index = 0
+        while True:
+            ok, bgr = capture.read()
+            if not ok:
+                return
+            seconds = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+            if size is not None:
+                bgr = resized(bgr, size)
+            yield index, seconds, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+            index += 1
+    finally:
+        capture.release()

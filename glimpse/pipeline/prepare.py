@@ -21,9 +21,16 @@ from typing import Any
 import yaml
 
 from glimpse.body.config import BodyConfig, check_scene_body_model
-from glimpse.config import Params, config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params
+from glimpse.config import (
+    Params,
+    config_from_mapping,
+    load_pipeline_yaml,
+    parse_cli_params,
+    resolve_params,
+)
 from glimpse.errors import SceneError
 from glimpse.pipeline.stages import STAGES, StageSpec, dag_makefile
+from glimpse.scene.runnable import check_runnable
 
 PARAMS_FORMAT = "glimpse-params/1"
 INPUTS_FORMAT = "glimpse-inputs/1"
@@ -192,11 +199,14 @@ def scene_name(scene_root: Path) -> str:
     return str(yaml.safe_load((scene_root / "scene.yaml").read_text())["name"])
 
 
-def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> tuple[RunPaths, Params]:
+def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "", whole_pipeline: bool = False
+                ) -> tuple[RunPaths, Params]:
     """Validate, resolve and write the .dag.mk and the .params/.inputs files of every stage.
 
-    Returns the run's paths and every resolved parameter. Raises SceneError or ConfigError on bad
-    input, before anything under ``out_root`` is touched except the validation cache.
+    ``whole_pipeline`` (``make all``): also refuse, with SceneNotRunnable, a valid scene that the pipeline
+    cannot run to the end (no people, a person with masks only); one stage alone (``make 01_sfm``) may still run.
+    Returns the run's paths and every resolved parameter. Raises SceneError, SceneNotRunnable or ConfigError
+    on bad input, before anything under ``out_root`` is touched except the validation cache.
     """
     scene_root = Path(scene_root)
     if not (scene_root / "scene.yaml").is_file():
@@ -204,6 +214,8 @@ def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "") -> tuple
 
         raise SceneError(str(scene_root), [Violation("scene.yaml", "the scene folder must contain scene.yaml", "no such file")])
     validate_cached(scene_root, Path(out_root) / ".cache")
+    if whole_pipeline:
+        check_runnable(scene_root)
     scene_yaml = yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}
     params = resolve_params(load_pipeline_yaml(), scene_yaml.get("overrides") or {}, parse_cli_params(cli_params),
                             str(scene_root / "scene.yaml"))

@@ -10,6 +10,7 @@ from glimpse.compute import ComputeConfig
 from glimpse.crops.config import CropsConfig
 from glimpse.eval.config import EvalConfig
 from glimpse.fit.config import FitConfig
+from glimpse.ingest.config import IngestConfig
 from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
 from glimpse.prior import prior_sections
@@ -23,6 +24,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "render": RenderConfig,
     "prior": PriorConfig,
     **prior_sections(),
+    "ingest": IngestConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
     "03_masks": MasksConfig,

@@ -146,6 +146,13 @@ class SceneWriter:
         for pid, mask in (person_masks or {}).items():
             self._png(f"eval/{camera}/masks/{pid}/{frame_name(frame_id)}.png", _mask_png(mask))
 
+    def side_file(self, relative: str) -> Path:
+        """A path inside the staged scene for a file the format does not name (a report, a preview): it moves
+        into place with the scene, and readers ignore it. Its folder is created."""
+        path = self.staging / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+
     # --- the end -------------------------------------------------------------------------------------
 
     def finish(self, validate: bool = True) -> Path:

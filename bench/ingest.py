@@ -1,0 +1,128 @@
+"""The ingest (glimpse ingest VIDEO SCENE_DIR) on fixture scenes with known people.
+
+Each scenario is rendered at the `hd` fixture size (960x720, 60 frames over 3 s, people 250-450 px tall as in a
+phone video), its frames are encoded to an H.264 video and everything else is set aside; the video is ingested
+with the default parameters and the result compared with the ground truth (glimpse.ingest.evaluate): per
+person, detection recall over frames where the person is at least half visible, identity switches, PCK of the
+COCO-17 keypoints at 10% of the torso size against the true joints (the body's COCO-17 keypoints projected by
+the true camera), and the mask IoU against the true visible mask. Speed: scene frames per second of the
+tracking pass on this machine, and milliseconds per frame per person.
+
+    python bench/ingest.py [--scenarios demo,crowd] [--seed 0] [--work DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from glimpse.body.keypoints import keypoint_map
+from glimpse.body.model import BodyModel
+from glimpse.fixtures.scenes import FREE_BODY, make_scene
+from glimpse.ingest.config import load_ingest_config
+from glimpse.ingest.evaluate import FoundPerson, TruePerson, score_people
+from glimpse.ingest.stage import ingest
+from glimpse.io.images import frame_files, read_mask, read_rgb
+from glimpse.io.video import write_mp4
+from glimpse.scene import load_scene
+
+SIZE = "hd"
+SCENARIOS = ("demo", "crowd", "moving_camera", "lower_body_occluded")
+PCK_FRACTION = 0.1
+JOINT_MASK_REACH_PX = 2  # a joint counts as visible when the person's visible mask is within this many pixels
+
+
+def true_people(scene_dir: Path) -> dict[int, dict[str, TruePerson]]:
+    """Frame id -> pid -> the true visible mask and COCO-17 joints of a fixture scene."""
+    truth_dir = scene_dir.with_name(scene_dir.name + ".groundtruth")
+    scene = load_scene(scene_dir)
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    coco = keypoint_map("coco17", model.data)
+    cameras = json.loads((scene_dir / "cameras.json").read_text())
+    K = np.array(cameras["K"])
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * JOINT_MASK_REACH_PX + 1,) * 2)
+    out: dict[int, dict[str, TruePerson]] = {}
+    for pid in scene.humans:
+        body = np.load(truth_dir / f"{pid}_body.npz")
+        for fid in scene.frame_ids:
+            with torch.no_grad():
+                posed = model(torch.as_tensor(body["betas"])[None], torch.as_tensor(body["global_orient"][fid:fid + 1]),
+                              torch.as_tensor(body["body_pose"][fid:fid + 1]), torch.as_tensor(body["transl"][fid:fid + 1]))
+            joints = coco(posed.joints, posed.vertices)[0].numpy()
+            pose = cameras["frames"][f"{fid:06d}"]
+            cam = joints @ np.array(pose["R"]).T + np.array(pose["t"])
+            uv = cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
+            mask = read_mask(scene_dir / "humans" / pid / "masks" / f"{fid:06d}.png")
+            grown = cv2.dilate(mask.astype(np.uint8), kernel) > 0
+            h, w = mask.shape
+            px = np.round(uv).astype(int)
+            inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+            visible = inside.copy()
+            visible[inside] = grown[px[inside, 1], px[inside, 0]]
+            out.setdefault(fid, {})[pid] = TruePerson(mask, uv, visible)
+    return out
+
+
+def found_people(scene_dir: Path) -> dict[int, dict[str, FoundPerson]]:
+    """Frame id -> pid -> the ingested mask and keypoints."""
+    out: dict[int, dict[str, FoundPerson]] = {}
+    for person_dir in sorted((scene_dir / "humans").iterdir()):
+        keypoints = np.load(person_dir / "keypoints2d.npz")
+        masks = frame_files(person_dir / "masks")
+        for fid, kp in zip(keypoints["frame_ids"].tolist(), keypoints["keypoints"]):
+            out.setdefault(fid, {})[person_dir.name] = FoundPerson(read_mask(masks[fid]), kp)
+    return out
+
+
+def run(scenario: str, size: str, seed: int, work: Path) -> list[dict]:
+    fixture = work / f"{scenario}_{size}_s{seed}"
+    if not (fixture / "scene.yaml").exists():
+        make_scene(scenario, fixture, size, seed)
+    scene = load_scene(fixture)
+    video = work / f"{fixture.name}.mp4"
+    if not video.exists():
+        write_mp4(video, (read_rgb(scene.frame_paths[f]) for f in scene.frame_ids), scene.fps)
+    ingested = work / f"{fixture.name}.ingested"
+    report = ingest(video, ingested, load_ingest_config())
+    scores = score_people(true_people(fixture), found_people(ingested), PCK_FRACTION)
+    people = max(len(report["people"]), 1)
+    rows = []
+    for pid, s in scores.items():
+        rows.append({"scenario": scenario, "person": pid, "frames": s.frames, "recall": s.recall,
+                     "switches": s.switches, "pck": s.pck, "mask_iou": s.mask_iou, "ids": ",".join(s.ids),
+                     "fps": report["tracking_fps"], "ms_per_person": 1000 / report["tracking_fps"] / people,
+                     "camera": report["camera_motion"]})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenarios", default=",".join(SCENARIOS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--size", default=SIZE, help="fixture size (default hd: 960x720)")
+    parser.add_argument("--work", type=Path, default=None, help="keeps fixtures and videos between runs")
+    args = parser.parse_args()
+    work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-ingest-"))
+    work.mkdir(parents=True, exist_ok=True)
+    rows = [row for name in args.scenarios.split(",") for row in run(name, args.size, args.seed, work)]
+    print(f"\nIngest on fixture videos ({args.size}, seed {args.seed}); targets: recall >= 0.95, switches 0, "
+          f"PCK@{PCK_FRACTION} >= 0.90, mask IoU >= 0.85\n")
+    print("| scenario | camera | person | frames (>= half visible) | recall | switches | PCK@0.1 | mask IoU | "
+          "found as | tracking fps | ms / frame / person |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['scenario']} | {r['camera']} | {r['person']} | {r['frames']} | {r['recall']:.3f} | {r['switches']} "
+              f"| {r['pck']:.3f} | {r['mask_iou']:.3f} | {r['ids']} | {r['fps']:.2f} | {r['ms_per_person']:.0f} |")
+
+
+if __name__ == "__main__":
+    main()

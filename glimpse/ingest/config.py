@@ -1,0 +1,53 @@
+"""The ingest's parameters (defaults and comments: pipeline.yaml, section ingest)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class IngestConfig:
+    blazepose_dir: str
+    max_side: int
+    track_max_side: int
+    max_frames: int
+    fps: float | None
+    threads: int
+    detect_min_score: float
+    detect_nms_iou: float
+    detect_tiles: int
+    detect_tile_overlap: float
+    landmark_min_presence: float
+    landmark_refine_heatmap: bool
+    landmark_flip_average: bool
+    landmark_refine_steps: int
+    track_duplicate_iou: float
+    track_max_missing_frames: int
+    track_reid_max_distance: float
+    track_min_frames: int
+    track_switch_distance: float
+    foreground_threshold: int
+    foreground_min_area: float
+    foreground_region_grow: float
+    plate_frames: int
+    motion_threshold: float
+    motion_sample_frames: int
+    motion_min_tracked_fraction: float
+    mask_threshold: float
+    keypoint_min_confidence: float
+    appearance_bins: int
+    appearance_update: float
+    preview: bool
+
+
+def load_ingest_config(cli_params: str = "") -> IngestConfig:
+    """pipeline.yaml's ``ingest`` section with "ingest.key=value ..." overrides (the PARAMS syntax)."""
+    from glimpse.config import (
+        config_from_mapping,
+        load_pipeline_yaml,
+        parse_cli_params,
+        resolve_params,
+    )
+
+    params = resolve_params(load_pipeline_yaml(), None, parse_cli_params(cli_params))
+    return config_from_mapping(IngestConfig, params["ingest"], "pipeline.yaml ingest")

@@ -1,0 +1,102 @@
+"""How well an ingest found the people, against ground truth (the fixture scenes'): per true person,
+detection recall, identity switches, 2D keypoint PCK and mask IoU.
+
+In each frame the found people are matched to the true ones by mask IoU (Hungarian method, pairs above
+``MATCH_MIN_IOU``). Counted over the frames where the true person is at least half visible (half of the
+COCO-17 joints inside the image and on the person's own visible pixels):
+
+- recall: the fraction of those frames in which someone found is matched to the person;
+- switches: how often the found id matched to the person changes from one matched frame to the next;
+- PCK: the fraction of visible joints found (confidence > 0) within ``pck_fraction`` of the torso size
+  (left shoulder to right hip) of the true joint;
+- mask IoU: found mask against the true visible mask (0 where nobody was matched).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+MATCH_MIN_IOU = 0.3
+HALF_VISIBLE = 0.5
+TORSO_JOINTS = (5, 12)  # COCO-17 left shoulder, right hip
+
+
+@dataclass(frozen=True)
+class TruePerson:
+    mask: np.ndarray  # [H, W] bool visible pixels
+    joints: np.ndarray  # [17, 2] pixels
+    visible: np.ndarray  # [17] bool: inside the image and on the person's visible pixels
+
+
+@dataclass(frozen=True)
+class FoundPerson:
+    mask: np.ndarray  # [H, W] bool
+    keypoints: np.ndarray  # [17, 3] pixels and confidence (0 = missing)
+
+
+@dataclass(frozen=True)
+class PersonScore:
+    frames: int  # frames where the person is at least half visible
+    recall: float
+    switches: int
+    pck: float
+    mask_iou: float
+    ids: tuple[str, ...]  # found ids matched to the person, in order of first match
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 0.0
+
+
+def match_frame(truth: dict[str, TruePerson], found: dict[str, FoundPerson]) -> dict[str, tuple[str, float]]:
+    """True pid -> (found pid, mask IoU) for one frame."""
+    true_ids, found_ids = list(truth), list(found)
+    if not true_ids or not found_ids:
+        return {}
+    iou = np.array([[_iou(truth[t].mask, found[f].mask) for f in found_ids] for t in true_ids])
+    rows, cols = linear_sum_assignment(-iou)
+    return {true_ids[r]: (found_ids[c], float(iou[r, c])) for r, c in zip(rows, cols) if iou[r, c] >= MATCH_MIN_IOU}
+
+
+def pck(joints: np.ndarray, visible: np.ndarray, keypoints: np.ndarray, fraction: float) -> tuple[int, int]:
+    """(correct, counted) visible joints within ``fraction`` of the torso size."""
+    torso = np.linalg.norm(joints[TORSO_JOINTS[0]] - joints[TORSO_JOINTS[1]])
+    error = np.linalg.norm(keypoints[:, :2] - joints, axis=1)
+    correct = visible & (keypoints[:, 2] > 0) & (error <= fraction * torso)
+    return int(correct.sum()), int(visible.sum())
+
+
+def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[str, FoundPerson]],
+                 pck_fraction: float) -> dict[str, PersonScore]:
+    """truth, found: frame id -> pid -> person. Returns true pid -> score (see the module docstring)."""
+    tallies: dict[str, dict] = {}
+    for frame_id in sorted(truth):
+        matches = match_frame(truth[frame_id], found.get(frame_id, {}))
+        for pid, person in truth[frame_id].items():
+            if person.visible.mean() < HALF_VISIBLE:
+                continue
+            tally = tallies.setdefault(pid, {"frames": 0, "hit": 0, "ids": [], "correct": 0, "counted": 0, "iou": 0.0})
+            tally["frames"] += 1
+            if pid not in matches:
+                continue
+            found_id, iou = matches[pid]
+            tally["hit"] += 1
+            tally["iou"] += iou
+            tally["ids"].append(found_id)
+            correct, counted = pck(person.joints, person.visible, found[frame_id][found_id].keypoints, pck_fraction)
+            tally["correct"] += correct
+            tally["counted"] += counted
+    scores = {}
+    for pid, t in sorted(tallies.items()):
+        ids = t["ids"]
+        scores[pid] = PersonScore(
+            frames=t["frames"], recall=t["hit"] / t["frames"],
+            switches=sum(a != b for a, b in pairwise(ids)),
+            pck=t["correct"] / t["counted"] if t["counted"] else 0.0, mask_iou=t["iou"] / t["frames"],
+            ids=tuple(dict.fromkeys(ids)))
+    return scores

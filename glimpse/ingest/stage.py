@@ -1,0 +1,182 @@
+"""``glimpse ingest VIDEO SCENE_DIR``: an ordinary video -> a glimpse-scene/1 folder.
+
+Three streaming passes (one frame in memory at a time, at the working size):
+
+1. survey (glimpse.ingest.survey): frame times, the scene's frames, camera motion, the background plate;
+2. track (glimpse.ingest.tracker): every chosen frame is written to the scene (at ``max_side``) and its
+   people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
+   labels go to a work folder;
+3. write: per person its masks and COCO-17 keypoints, the preview video and the tracks report
+   (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them).
+
+The scene is staged beside SCENE_DIR and renamed into place only when complete and valid: a failed ingest
+leaves a previous scene there untouched.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from glimpse.config import REPO_ROOT
+from glimpse.errors import GlimpseError
+from glimpse.ingest.blazepose import BlazePose
+from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.report import (
+    PersonTrack,
+    preview_frames,
+    report_table,
+    tracks_report,
+)
+from glimpse.ingest.survey import Survey, survey_video
+from glimpse.ingest.tracker import Track, Tracker, depth_ordered_labels
+from glimpse.io.images import frame_name
+from glimpse.io.json_file import write_json
+from glimpse.io.video import iter_video, resized, write_mp4
+from glimpse.scene.writer import SceneWriter
+
+log = logging.getLogger("glimpse")
+
+SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
+PREVIEW_FILE = "ingest/preview.mp4"
+REPORT_FILE = "ingest/tracks.json"
+
+
+def blazepose_folder(config: IngestConfig) -> Path:
+    folder = Path(config.blazepose_dir)
+    return folder if folder.is_absolute() else REPO_ROOT / folder
+
+
+def _label_path(work: Path, frame_id: int) -> Path:
+    return work / f"{frame_name(frame_id)}.png"
+
+
+def _chosen_frames(path: Path, survey: Survey, desc: str):
+    """(scene frame id, [H, W, 3] uint8 at the decoded size) of the survey's chosen frames, decoded again."""
+    last = max(survey.chosen)
+    for index, _seconds, rgb in tqdm(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
+        if index in survey.chosen:
+            yield survey.chosen[index], rgb
+        if index >= last:
+            return
+
+
+def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
+    """[..., 2] tracking-size pixel coordinates -> scene-size ones (pixel centres kept)."""
+    ratio = np.array([survey.width / survey.track_width, survey.height / survey.track_height])
+    return (points + 0.5) * ratio - 0.5
+
+
+def _kept_people(tracks: list[Track], survey: Survey, min_frames: int) -> tuple[list[PersonTrack], int]:
+    """Tracks seen in at least ``min_frames`` frames, named p0, p1, ... in order of first appearance, their
+    keypoints and boxes in scene pixels."""
+    kept = sorted((t for t in tracks if len(t.frames) >= min_frames), key=lambda t: (t.frames[0], t.index))
+    people = []
+    for k, track in enumerate(kept):
+        keypoints = np.stack(track.keypoints)
+        found = keypoints[..., 2:] > 0
+        keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
+        boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
+        people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, boxes,
+                                  list(track.reidentified), list(track.jumps)))
+    return people, len(tracks) - len(kept)
+
+
+def _person_mask(labels: np.ndarray, label: int, survey: Survey) -> np.ndarray:
+    """[H, W] bool at the scene's size: the pixels of tracking-size ``labels`` that belong to ``label``."""
+    mine = (labels == label).astype(np.float32)
+    return resized(mine, (survey.width, survey.height)) > SCENE_MASK_COVERAGE
+
+
+def _scene_labels(labels: np.ndarray, people: list[PersonTrack], survey: Survey) -> np.ndarray:
+    """Tracking-size labels -> scene-size labels of the kept people."""
+    out = np.zeros((survey.height, survey.width), np.uint16)
+    for person in people:
+        out[_person_mask(labels, person.label, survey)] = person.label
+    return out
+
+
+def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
+    """Ingest ``video`` into ``scene_dir`` (see the module docstring); returns the tracks report."""
+    video, scene_dir = Path(video), Path(scene_dir)
+    started = time.perf_counter()
+    survey = survey_video(video, config)
+    model = BlazePose(blazepose_folder(config), config.threads)
+    motion = "static" if survey.static else "moving"
+    log.info("%s: %dx%d at %.3g fps -> %d frames at %dx%d, camera %s (motion %.3g of the diagonal)", video,
+             survey.info.width, survey.info.height, survey.fps, len(survey.chosen), survey.width, survey.height,
+             motion, survey.motion.motion)
+    scene_dir.parent.mkdir(parents=True, exist_ok=True)
+    writer = SceneWriter(scene_dir, video.stem, survey.fps, motion)
+    with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
+        work = Path(work_dir)
+        tracker = Tracker(model, config, survey.plate)
+        track_started = time.perf_counter()
+        track_size = (survey.track_width, survey.track_height)
+        for frame_id, rgb in _chosen_frames(video, survey, "tracking people"):
+            writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
+            tracked = resized(rgb, track_size)
+            observed = tracker.step(frame_id, tracked)
+            labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold)
+            cv2.imwrite(str(_label_path(work, frame_id)), labels)
+        track_seconds = time.perf_counter() - track_started
+        people, dropped = _kept_people(tracker.tracks, survey, config.track_min_frames)
+        if not people:
+            shutil.rmtree(writer.staging, ignore_errors=True)
+            raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
+                               f"{config.track_min_frames} frames or more); Glimpse reconstructs people, so it "
+                               "needs a video with at least one person in view")
+        frame_ids = sorted(survey.chosen.values())
+        for person in people:
+            writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints)
+            for frame_id in person.frames:
+                labels = cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
+                writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
+        facts = {
+            "video": str(video), "video_size": [survey.info.width, survey.info.height],
+            "rotation_deg": survey.info.rotation_deg, "scene_size": [survey.width, survey.height],
+            "tracking_size": [survey.track_width, survey.track_height],
+            "fps": survey.fps, "frames": len(frame_ids), "decoded_frames": survey.decoded,
+            "container_frames": survey.info.frame_count, "truncated": survey.truncated,
+            "frame_limit": config.max_frames if survey.limited else None,
+            "camera_motion": motion, "camera_motion_measure": survey.motion.motion,
+            "seconds": {"total": None, "tracking": track_seconds},
+            "tracking_fps": len(frame_ids) / max(track_seconds, 1e-9),
+        }
+        if config.preview:
+            frames = ((fid, resized(rgb, (survey.width, survey.height)),
+                       _scene_labels(cv2.imread(str(_label_path(work, fid)), cv2.IMREAD_UNCHANGED), people, survey))
+                      for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
+            write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
+                      survey.fps)
+        facts["seconds"]["total"] = time.perf_counter() - started
+        report = tracks_report(people, dropped, facts)
+        write_json(writer.side_file(REPORT_FILE), report)
+        writer.finish()
+    _announce(video, scene_dir, survey, report, config)
+    return report
+
+
+def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:
+    notes = []
+    if (survey.width, survey.height) != (survey.info.width, survey.info.height):
+        notes.append(f"downscaled {survey.info.width}x{survey.info.height} -> {survey.width}x{survey.height} "
+                     f"(ingest.max_side {config.max_side})")
+    if survey.limited:
+        notes.append(f"kept the first {config.max_frames} frames (ingest.max_frames)")
+    if survey.truncated:
+        notes.append(f"the file looks truncated: decoded {survey.decoded} of the {survey.info.frame_count} frames "
+                     "its container lists; the scene holds those")
+    print(f"ingested {video} -> {scene_dir}: {report['frames']} frames, {len(report['people'])} people, "
+          f"camera {report['camera_motion']}")
+    for note in notes:
+        print(f"  note: {note}")
+    print(report_table(report))
+    print(f"  check the tracks before a run: {scene_dir / PREVIEW_FILE} and {scene_dir / REPORT_FILE}")

@@ -1,0 +1,109 @@
+"""The ingest's first pass over a video: which decoded frames become scene frames, whether the camera moves,
+and (for a fixed camera) the background plate.
+
+Frame times follow the container's presentation timestamps, so a variable-frame-rate phone video becomes a
+constant-rate scene: scene frame k is the decoded frame on screen at time k / fps (fps: the parameter, else the
+container's rate). A constant-rate video keeps its own frame indices as ids. Frames are streamed: the pass
+holds only a bounded sample of frames (for the plate and the motion measure), at the tracking size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from glimpse.cameras.motion import MotionMeasure, measure_motion
+from glimpse.errors import GlimpseError
+from glimpse.ingest.config import IngestConfig
+from glimpse.io.video import VideoInfo, iter_video, probe_video
+
+TIME_TOLERANCE_S = 1e-3  # a frame shown within a millisecond of a grid time counts as on it
+
+
+@dataclass(frozen=True)
+class Survey:
+    info: VideoInfo
+    width: int  # the scene's frame size, pixels (ingest.max_side)
+    height: int
+    track_width: int  # the size people are found and followed at (ingest.track_max_side)
+    track_height: int
+    fps: float  # the scene's frame rate
+    chosen: dict[int, int]  # decode index -> scene frame id
+    decoded: int  # frames decoded in the first pass
+    truncated: bool  # the container promised more frames than decoded (and no frame limit explains it)
+    limited: bool  # ingest.max_frames cut the video short
+    motion: MotionMeasure
+    static: bool  # the measured motion is within ingest.motion_threshold
+    plate: np.ndarray | None  # [H, W, 3] uint8 per-pixel median of sampled frames (fixed camera), else None
+
+
+def grid_choice(times: list[float], fps: float, max_frames: int) -> dict[int, int]:
+    """Decode index -> scene frame id: for each grid time k / fps (k = 0, 1, ...; time measured from the first
+    frame) the last frame shown at or before it; at most ``max_frames`` ids. ``times`` must be increasing."""
+    if not times:
+        return {}
+    start = times[0]
+    chosen: dict[int, int] = {}
+    index = 0
+    k = 0
+    while k < max_frames:
+        grid = k / fps
+        if grid > times[-1] - start + TIME_TOLERANCE_S:
+            break
+        while index + 1 < len(times) and times[index + 1] - start <= grid + TIME_TOLERANCE_S:
+            index += 1
+        chosen.setdefault(index, k)
+        k += 1
+    return chosen
+
+
+def fitted_size(info: VideoInfo, max_side: int) -> tuple[int, int]:
+    """(width, height) of the video's frames shrunk, if needed, to ``max_side`` (aspect ratio kept)."""
+    scale = min(1.0, max_side / max(info.width, info.height))
+    return max(1, round(info.width * scale)), max(1, round(info.height * scale))
+
+
+def survey_video(path: Path, config: IngestConfig) -> Survey:
+    """First pass (see the module docstring)."""
+    info = probe_video(path)
+    fps = config.fps or info.fps
+    if not fps or fps <= 0:
+        raise GlimpseError(f"{path}: the container gives no frame rate; set ingest.fps")
+    track_size = fitted_size(info, config.track_max_side)
+    stop_after_s = (config.max_frames - 1) / fps + 1.0 / fps  # no need to decode beyond the last kept grid time
+    sample_every = max(1, int(np.ceil(max(info.frame_count, 1) / config.plate_frames)))
+    times: list[float] = []
+    samples: list[np.ndarray] = []
+    limited = False
+    for index, seconds, rgb in tqdm(iter_video(path, track_size), desc="surveying video", unit="frame", leave=False,
+                                    total=info.frame_count or None):
+        if times and seconds <= times[-1]:  # a decoder without timestamps: fall back to the nominal rate
+            seconds = times[-1] + 1.0 / fps
+        if times and seconds - times[0] > stop_after_s:
+            limited = True
+            break
+        times.append(seconds)
+        if index % sample_every == 0:
+            samples.append(rgb)
+            if len(samples) > config.plate_frames:
+                samples = samples[::2]
+                sample_every *= 2
+    if not times:
+        raise GlimpseError(f"{path}: the video has no decodable frame")
+    chosen = grid_choice(times, fps, config.max_frames)
+    limited = limited or len(chosen) >= config.max_frames
+    truncated = not limited and info.frame_count > 0 and len(times) < info.frame_count * 0.9
+    greys = [cv2.cvtColor(s, cv2.COLOR_RGB2GRAY) for s in samples]
+    picks = list(range(1, len(greys)))
+    if len(picks) > config.motion_sample_frames:
+        picks = sorted({picks[round(i)] for i in np.linspace(0, len(picks) - 1, config.motion_sample_frames)})
+    motion = measure_motion(greys[0], [(i, greys[i]) for i in picks], config.motion_min_tracked_fraction)
+    static = motion.motion <= config.motion_threshold
+    plate = np.median(np.stack(samples), axis=0).astype(np.uint8) if static and len(samples) > 1 else None
+    width, height = fitted_size(info, config.max_side)
+    return Survey(info, width, height, *track_size, float(fps), chosen, len(times), truncated, limited, motion,
+                  static, plate)

@@ -1,0 +1,187 @@
+"""`glimpse ingest VIDEO SCENE_DIR`: videos in (rotated, variable-rate, broken, empty, oversized, without
+people) and, on a rendered fixture scene with known people, a valid scene out with every person found and
+tracked under one id (BlazePose's real models, from `make models`)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from glimpse.errors import GlimpseError
+from glimpse.fixtures.scenes import make_scene
+from glimpse.ingest.config import load_ingest_config
+from glimpse.ingest.stage import PREVIEW_FILE, REPORT_FILE, blazepose_folder, ingest
+from glimpse.ingest.survey import survey_video
+from glimpse.io.images import read_rgb
+from glimpse.io.video import probe_video, read_mp4, write_mp4
+from glimpse.scene import load_scene, read_keypoints2d, validate_scene
+
+CONFIG = load_ingest_config()
+MODELS_MISSING = not (blazepose_folder(CONFIG) / "pose_landmark_full.tflite").is_file()
+needs_models = pytest.mark.skipif(MODELS_MISSING, reason="BlazePose models missing: run `make models`")
+
+
+def _ffmpeg() -> str:
+    import imageio_ffmpeg
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def _pattern_video(path: Path, frames: int = 10, size: tuple[int, int] = (64, 48), fps: float = 10.0) -> Path:
+    """A video whose left half is red and right half blue (so an orientation change shows)."""
+    width, height = size
+    image = np.zeros((height, width, 3), np.uint8)
+    image[:, : width // 2] = [220, 20, 20]
+    image[:, width // 2:] = [20, 20, 220]
+    write_mp4(path, (image for _ in range(frames)), fps)
+    return path
+
+
+def test_rotated_video_is_read_upright(tmp_path: Path) -> None:
+    plain = _pattern_video(tmp_path / "plain.mp4")
+    rotated = tmp_path / "rotated.mp4"
+    subprocess.run([_ffmpeg(), "-y", "-loglevel", "error", "-display_rotation", "90", "-i", str(plain), "-c", "copy",
+                    str(rotated)], check=True)
+    info = probe_video(rotated)
+    assert (info.width, info.height) == (48, 64) and info.rotation_deg in (90.0, 270.0)
+    survey = survey_video(rotated, CONFIG)
+    assert (survey.width, survey.height) == (48, 64)
+
+
+def test_variable_frame_rate_becomes_a_constant_rate_scene(tmp_path: Path) -> None:
+    source = _pattern_video(tmp_path / "source.mp4", frames=20)
+    vfr = tmp_path / "vfr.mp4"
+    # frames 0-9 every 0.1 s, then frames 10-19 every 0.3 s: 3.7 s in all
+    subprocess.run([_ffmpeg(), "-y", "-loglevel", "error", "-i", str(source), "-vf",
+                    "setpts='if(lt(N,10),N*0.1,1.0+(N-10)*0.3)/TB'", "-fps_mode", "vfr", "-c:v", "libx264",
+                    "-pix_fmt", "yuv420p", str(vfr)], check=True)
+    from dataclasses import replace
+
+    survey = survey_video(vfr, replace(CONFIG, fps=10.0))
+    assert survey.decoded == 20
+    ids = sorted(survey.chosen.values())
+    assert len(survey.chosen) == 20 and ids == list(range(10)) + [10, 13, 16, 19, 22, 25, 28, 31, 34, 37]
+
+
+@pytest.mark.parametrize("content", [b"", b"not a video at all\n" * 50], ids=["empty-file", "text-file"])
+def test_unreadable_files_get_one_clear_error(tmp_path: Path, content: bytes) -> None:
+    path = tmp_path / "clip.mp4"
+    path.write_bytes(content)
+    with pytest.raises(GlimpseError, match=r"clip\.mp4: not a readable video"):
+        ingest(path, tmp_path / "scene", CONFIG)
+    assert not (tmp_path / "scene").exists()
+
+
+def test_truncated_video_is_refused_or_reported(tmp_path: Path) -> None:
+    whole = _pattern_video(tmp_path / "whole.mp4", frames=30)
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    try:
+        survey = survey_video(cut, CONFIG)
+    except GlimpseError as error:
+        assert "cut.mp4" in str(error)
+    else:
+        assert survey.truncated and survey.decoded < 30
+
+
+def test_missing_video(tmp_path: Path) -> None:
+    with pytest.raises(GlimpseError, match="no such video file"):
+        ingest(tmp_path / "nothing.mp4", tmp_path / "scene", CONFIG)
+
+
+@needs_models
+def test_video_without_people_keeps_a_previous_scene(tmp_path: Path) -> None:
+    video = _pattern_video(tmp_path / "empty_room.mp4", frames=12, size=(160, 120))
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    (scene / "keep.txt").write_text("an earlier scene")
+    with pytest.raises(GlimpseError, match="no person found"):
+        ingest(video, scene, CONFIG)
+    assert (scene / "keep.txt").read_text() == "an earlier scene"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty_room.mp4", "scene"]  # no staging left behind
+
+
+# --- a rendered scene with known people ------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def demo_video(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The demo fixture (two people crossing, one cut by the frame border) at 480x360, as a video."""
+    root = tmp_path_factory.mktemp("ingest")
+    fixture = make_scene("demo", root / "demo", "medium", seed=3)
+    scene = load_scene(fixture)
+    video = write_mp4(root / "demo.mp4", (read_rgb(scene.frame_paths[f]) for f in scene.frame_ids), scene.fps)
+    assert video == len(scene.frame_ids)
+    return fixture, root / "demo.mp4"
+
+
+@pytest.fixture(scope="module")
+def ingested(demo_video: tuple[Path, Path]) -> tuple[Path, dict]:
+    fixture, video = demo_video
+    scene = fixture.with_name("ingested")
+    report = ingest(video, scene, CONFIG)
+    return scene, report
+
+
+@needs_models
+def test_ingest_writes_a_valid_scene_with_both_people(demo_video, ingested) -> None:
+    fixture, _ = demo_video
+    scene_dir, report = ingested
+    assert validate_scene(scene_dir) == []
+    scene = load_scene(scene_dir)
+    truth = load_scene(fixture)
+    assert scene.frame_ids == truth.frame_ids and scene.fps == pytest.approx(truth.fps)
+    assert (scene.width, scene.height) == (truth.width, truth.height)
+    assert scene.camera_motion == "static"
+    assert sorted(scene.humans) == ["p0", "p1"]
+    for person in scene.humans.values():
+        keypoints = read_keypoints2d(person.keypoints2d)
+        assert sorted(person.masks) == keypoints.frame_ids.tolist()
+        assert keypoints.layout == "coco17" and keypoints.keypoints.shape[1:] == (17, 3)
+        confidence = keypoints.keypoints[..., 2]
+        assert ((confidence == 0) | (confidence >= CONFIG.keypoint_min_confidence)).all()
+        assert (keypoints.keypoints[..., :2][confidence == 0] == 0).all()  # missing joints are not invented
+    on_disk = json.loads((scene_dir / REPORT_FILE).read_text())
+    assert on_disk["people"].keys() == report["people"].keys() and on_disk["frames"] == len(truth.frame_ids)
+    preview = read_mp4(scene_dir / PREVIEW_FILE)
+    assert preview.shape[0] == len(truth.frame_ids)
+
+
+@needs_models
+def test_ingest_finds_and_follows_each_true_person(demo_video, ingested) -> None:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    from ingest import (  # bench/ingest.py: the ground-truth side of the benchmark
+        found_people,
+        true_people,
+    )
+
+    from glimpse.ingest.evaluate import score_people
+
+    fixture, _ = demo_video
+    scene_dir, _ = ingested
+    scores = score_people(true_people(fixture), found_people(scene_dir), pck_fraction=0.2)
+    assert sorted(scores) == ["p0", "p1"]
+    found_as = [s.ids for s in scores.values()]
+    for pid, score in scores.items():
+        assert score.recall >= 0.8, (pid, score)
+        assert score.switches == 0 and len(score.ids) == 1, (pid, score)
+        assert score.mask_iou >= 0.7, (pid, score)
+        assert score.pck >= 0.7, (pid, score)
+    assert found_as[0] != found_as[1]  # two people, two ids
+
+
+@needs_models
+def test_downscale_and_frame_limit_are_stated(demo_video, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    _, video = demo_video
+    report = ingest(video, tmp_path / "small", replace(CONFIG, max_side=240, max_frames=8, preview=False))
+    assert report["scene_size"] == [240, 180] and report["frames"] == 8 and report["frame_limit"] == 8
+    scene = load_scene(tmp_path / "small")
+    assert (scene.width, scene.height) == (240, 180) and scene.frame_ids == list(range(8))
+    assert not (tmp_path / "small" / PREVIEW_FILE).exists()

@@ -1,0 +1,185 @@
+"""The ingest's pure parts: regions and crops, BlazePose's decoding (anchors, boxes, suppression, heatmap
+refinement, mirroring), appearance, the frame-time grid and the evaluation against ground truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from glimpse.ingest.appearance import appearance, appearance_distance
+from glimpse.ingest.blazepose import (
+    DETECTOR_SIZE,
+    LANDMARK_COUNT,
+    LANDMARK_SIZE,
+    LANDMARK_VALUES,
+    Detections,
+    decode_detections,
+    mirror_permutation,
+    refine_with_heatmap,
+    ssd_anchor_centres,
+    unmirror,
+    weighted_nms,
+)
+from glimpse.ingest.crop import (
+    Region,
+    crop_affine,
+    crop_image,
+    crop_to_image,
+    paste_to_image,
+    region_around_box,
+    region_from_alignment,
+)
+from glimpse.ingest.evaluate import FoundPerson, TruePerson, score_people
+from glimpse.ingest.survey import grid_choice
+
+# --- regions and crops ---------------------------------------------------------------------------------------
+
+def test_upright_alignment_gives_no_rotation_and_twice_the_radius() -> None:
+    region = region_from_alignment(np.array([100.0, 200.0]), np.array([100.0, 120.0]), grow=1.25)
+    assert region.angle == pytest.approx(0.0)
+    assert region.side == pytest.approx(2 * 80 * 1.25)
+    np.testing.assert_allclose(region.centre, [100, 200])
+
+
+def test_rotated_region_puts_the_scale_point_at_the_top_of_the_crop() -> None:
+    centre, scale_point = np.array([50.0, 60.0]), np.array([90.0, 60.0])  # lying, head to the right
+    region = region_from_alignment(centre, scale_point, grow=1.0)
+    size = 64
+    affine = crop_affine(region, size)
+    # the crop pixel at the top middle edge maps to the scale point (side = 2 * radius)
+    top_middle = np.array([[size / 2 - 0.5, -0.5]])
+    np.testing.assert_allclose(crop_to_image(region, top_middle, size), scale_point[None], atol=1e-9)
+    np.testing.assert_allclose(affine[:, :2] @ [size / 2 - 0.5, size / 2 - 0.5] + affine[:, 2], centre, atol=1e-9)
+
+
+def test_crop_and_paste_are_inverse_maps() -> None:
+    image = np.zeros((60, 80), np.float32)
+    image[20:30, 35:45] = 1.0
+    region = Region(np.array([40.0, 25.0]), 40.0, 0.3)
+    crop = crop_image(image[..., None].repeat(3, 2), region, 40)[..., 0]
+    back = paste_to_image(crop, region, 80, 60)
+    assert np.abs(back[22:28, 37:43] - 1.0).max() < 0.05  # the square's interior survives the round trip
+    assert back[:10].max() == 0.0  # outside the region: zero
+
+
+def test_region_around_box_is_an_upright_square_on_the_longer_side() -> None:
+    region = region_around_box(np.array([10.0, 20.0, 30.0, 100.0]), 1.5)
+    assert region.angle == 0.0 and region.side == pytest.approx(120.0)
+    np.testing.assert_allclose(region.box(), [-40, 0, 80, 120])
+
+
+# --- BlazePose decoding --------------------------------------------------------------------------------------
+
+def test_anchor_layout_matches_the_detector_output() -> None:
+    anchors = ssd_anchor_centres()
+    assert anchors.shape == (2254, 2)  # 28*28*2 + 14*14*2 + 7*7*6
+    np.testing.assert_allclose(anchors[0], [0.5 / 28, 0.5 / 28])
+    np.testing.assert_allclose(anchors[1], anchors[0])  # two anchors per cell
+    np.testing.assert_allclose(anchors[2], [1.5 / 28, 0.5 / 28])  # x runs fastest
+    np.testing.assert_allclose(anchors[28 * 28 * 2], [0.5 / 14, 0.5 / 14])
+    np.testing.assert_allclose(anchors[-1], [6.5 / 7, 6.5 / 7])
+    assert (anchors[-6:] == anchors[-1]).all()  # three stride-32 layers share the 7x7 grid
+
+
+def test_decoding_offsets_boxes_and_points_from_their_anchor() -> None:
+    anchors = ssd_anchor_centres()
+    raw = np.zeros((len(anchors), 12), np.float32)
+    scores = np.full((len(anchors), 1), -20.0, np.float32)
+    k = 1000
+    raw[k, :4] = [11.2, -22.4, 44.8, 89.6]  # dx, dy, w, h in detector pixels
+    raw[k, 4:6] = [5.6, 0.0]
+    scores[k] = 3.0
+    found = decode_detections(raw, scores, anchors, min_score=0.5)
+    assert len(found) == 1
+    cx, cy = anchors[k] + [0.05, -0.1]
+    np.testing.assert_allclose(found.boxes[0], [cx - 0.1, cy - 0.2, cx + 0.1, cy + 0.2], atol=1e-6)
+    np.testing.assert_allclose(found.points[0, 0], anchors[k] + [0.025, 0.0], atol=1e-6)
+    assert found.scores[0] == pytest.approx(1 / (1 + np.exp(-3.0)))
+    assert DETECTOR_SIZE == 224
+
+
+def test_weighted_suppression_blends_overlapping_detections() -> None:
+    boxes = np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], float)
+    points = np.zeros((3, 4, 2))
+    points[:, 0] = [[5, 5], [6, 5], [55, 55]]
+    found = weighted_nms(Detections(boxes, points, np.array([0.9, 0.3, 0.5])), iou_threshold=0.3)
+    assert len(found) == 2
+    np.testing.assert_allclose(found.boxes[0], [0.25, 0, 10.25, 10])  # (0.9 * 0 + 0.3 * 1) / 1.2
+    np.testing.assert_allclose(found.points[0, 0], [5.25, 5])
+    assert found.scores.tolist() == [0.9, 0.5]
+
+
+def test_heatmap_refinement_moves_a_landmark_to_the_peak_cell_centre() -> None:
+    raw = np.zeros(LANDMARK_COUNT * LANDMARK_VALUES, np.float32)
+    raw[0:2] = [100.0, 60.0]  # landmark 0, crop pixels
+    heatmap = np.full((64, 64, LANDMARK_COUNT), -20.0, np.float32)
+    heatmap[16, 26, 0] = 20.0  # one confident cell near (100, 60) / 4
+    refined = refine_with_heatmap(raw, heatmap).reshape(-1, LANDMARK_VALUES)
+    np.testing.assert_allclose(refined[0, :2], [(26 + 0.5) * 4, (16 + 0.5) * 4], atol=1e-3)
+    heatmap[16, 26, 0] = -20.0  # not confident: unchanged
+    np.testing.assert_allclose(refine_with_heatmap(raw, heatmap)[0:2], [100.0, 60.0])
+
+
+def test_mirroring_twice_is_the_identity_and_swaps_sides() -> None:
+    order = mirror_permutation()
+    assert (order[order] == np.arange(LANDMARK_COUNT)).all()
+    assert order[11] == 12 and order[0] == 0 and order[33] == 33
+    rng = np.random.default_rng(0)
+    raw = rng.uniform(0, LANDMARK_SIZE, LANDMARK_COUNT * LANDMARK_VALUES)
+    world = rng.normal(size=LANDMARK_COUNT * 3)
+    segmentation = rng.random((LANDMARK_SIZE, LANDMARK_SIZE))
+    once = unmirror(raw, world, segmentation)
+    twice = unmirror(*once)
+    for a, b in zip(twice, (raw, world, segmentation)):
+        np.testing.assert_allclose(a, b)
+    np.testing.assert_allclose(once[0].reshape(-1, 5)[11, 0], LANDMARK_SIZE - raw.reshape(-1, 5)[12, 0])
+
+
+# --- appearance, frame times ----------------------------------------------------------------------------------
+
+def test_appearance_tells_colours_apart() -> None:
+    image = np.zeros((40, 20, 3), np.uint8)
+    image[:20] = [200, 30, 30]  # red top
+    image[20:] = [30, 30, 200]  # blue bottom
+    mask = np.ones((40, 20), bool)
+    look = appearance(image, mask, 20, bins=12)
+    assert appearance_distance(look, look) == pytest.approx(0.0, abs=1e-6)
+    swapped = appearance(image[::-1].copy(), mask, 20, bins=12)
+    assert appearance_distance(look, swapped) > 0.9
+    empty = appearance(image, np.zeros_like(mask), 20, bins=12)
+    assert appearance_distance(look, empty) == 1.0  # nothing to compare
+
+
+def test_frame_grid_follows_timestamps() -> None:
+    constant = [k / 10 for k in range(10)]
+    assert grid_choice(constant, 10.0, 100) == {k: k for k in range(10)}
+    assert grid_choice(constant, 5.0, 100) == {0: 0, 2: 1, 4: 2, 6: 3, 8: 4}
+    assert grid_choice(constant, 10.0, 3) == {0: 0, 1: 1, 2: 2}
+    variable = [0.0, 0.1, 0.2, 0.5, 0.6]  # a pause: the frame at 0.2 s stays on screen until 0.5 s
+    assert grid_choice(variable, 10.0, 100) == {0: 0, 1: 1, 2: 2, 3: 5, 4: 6}
+
+
+# --- evaluation -----------------------------------------------------------------------------------------------
+
+def _person(x0: int, visible: bool = True) -> tuple[TruePerson, FoundPerson]:
+    mask = np.zeros((20, 40), bool)
+    mask[2:18, x0:x0 + 8] = True
+    joints = np.stack([np.full(17, x0 + 4.0), np.linspace(3, 17, 17)], 1)
+    keypoints = np.concatenate([joints + 0.3, np.ones((17, 1))], 1)  # 0.42 px off; torso 7 px
+    return TruePerson(mask, joints, np.full(17, visible)), FoundPerson(mask, keypoints)
+
+
+def test_scores_count_recall_switches_and_pck() -> None:
+    truth, found = {}, {}
+    for frame in range(6):
+        a_true, a_found = _person(2)
+        b_true, _ = _person(25)
+        truth[frame] = {"a": a_true, "b": b_true}
+        found[frame] = {"x": a_found} if frame != 2 else {}  # a missed once; b never found
+        if frame >= 3:
+            found[frame] = {"y": a_found}  # a's id changes at frame 3
+    scores = score_people(truth, found, pck_fraction=0.1)
+    assert scores["a"].recall == pytest.approx(5 / 6) and scores["a"].switches == 1
+    assert scores["a"].ids == ("x", "y") and scores["a"].pck == 1.0
+    assert scores["a"].mask_iou == pytest.approx(5 / 6)
+    assert scores["b"].recall == 0.0 and scores["b"].mask_iou == 0.0
