@@ -185,3 +185,55 @@ def test_downscale_and_frame_limit_are_stated(demo_video, tmp_path: Path) -> Non
     scene = load_scene(tmp_path / "small")
     assert (scene.width, scene.height) == (240, 180) and scene.frame_ids == list(range(8))
     assert not (tmp_path / "small" / PREVIEW_FILE).exists()
+
+
+@needs_models
+def test_user_onnx_models_plug_in(demo_video, tmp_path: Path) -> None:
+    """detector: onnx finds people (BlazePose still follows and segments them); pose: onnx gives the keypoints."""
+    from dataclasses import replace
+
+    from tests.tiny_onnx import bright_box_detector, brightest_point_pose
+
+    _, video = demo_video
+    config = replace(CONFIG, max_frames=6, preview=False, track_min_frames=1, detector="onnx", pose="onnx",
+                     detector_onnx_path=bright_box_detector(tmp_path / "det.onnx"),
+                     pose_onnx_path=brightest_point_pose(tmp_path / "pose.onnx"), keypoint_min_confidence=0.0)
+    ingest(video, tmp_path / "scene", config)
+    scene = load_scene(tmp_path / "scene")
+    assert scene.humans
+    for person in scene.humans.values():
+        keypoints = read_keypoints2d(person.keypoints2d).keypoints
+        # the stand-in pose model puts all 17 keypoints on one point: the keypoints are its, not BlazePose's
+        assert np.ptp(keypoints[..., :2], axis=1).max() < 1e-6
+
+
+def test_focal_length_tag_gives_the_intrinsics(tmp_path: Path) -> None:
+    from glimpse.ingest.survey import intrinsics_from_focal
+
+    plain = _pattern_video(tmp_path / "plain.mp4", size=(64, 48))
+    tagged = tmp_path / "tagged.mp4"
+    subprocess.run([_ffmpeg(), "-y", "-loglevel", "error", "-i", str(plain), "-c", "copy", "-movflags",
+                    "use_metadata_tags", "-metadata", "com.apple.quicktime.camera.focal_length.35mm_equivalent=26",
+                    str(tagged)], check=True)
+    assert survey_video(tagged, CONFIG).focal_35mm == 26.0
+    assert survey_video(plain, CONFIG).focal_35mm is None
+    K = intrinsics_from_focal(26.0, 4000, 3000)  # a phone's main camera: 80 degrees across the diagonal
+    assert np.degrees(2 * np.arctan(2500 / K[0, 0])) == pytest.approx(79.5, abs=0.5)
+    np.testing.assert_allclose(K[:2, 2], [1999.5, 1499.5])
+
+
+@needs_models
+def test_a_static_video_with_a_focal_length_gets_cameras_json(demo_video, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from glimpse.ingest.survey import intrinsics_from_focal
+
+    _, video = demo_video
+    tagged = tmp_path / "tagged.mp4"
+    subprocess.run([_ffmpeg(), "-y", "-loglevel", "error", "-i", str(video), "-c", "copy", "-movflags",
+                    "use_metadata_tags", "-metadata", "com.apple.quicktime.camera.focal_length.35mm_equivalent=30",
+                    str(tagged)], check=True)
+    report = ingest(tagged, tmp_path / "scene", replace(CONFIG, max_frames=6, preview=False))
+    scene = load_scene(tmp_path / "scene")
+    assert report["focal_35mm_equivalent"] == 30.0 and scene.cameras is not None
+    np.testing.assert_allclose(scene.cameras.K, intrinsics_from_focal(30.0, scene.width, scene.height))

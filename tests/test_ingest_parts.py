@@ -183,3 +183,37 @@ def test_scores_count_recall_switches_and_pck() -> None:
     assert scores["a"].ids == ("x", "y") and scores["a"].pck == 1.0
     assert scores["a"].mask_iou == pytest.approx(5 / 6)
     assert scores["b"].recall == 0.0 and scores["b"].mask_iou == 0.0
+
+
+def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
+    from glimpse.ingest.blazepose import pair_sides_like
+
+    reference = np.zeros((LANDMARK_COUNT, LANDMARK_VALUES))
+    reference[25, :2], reference[26, :2] = [100, 200], [140, 200]  # left and right knee
+    other = reference.copy()
+    other[[25, 26]] = other[[26, 25]]  # the mirrored run called them the other way round
+    other[0, :2] = [5, 5]
+    paired = pair_sides_like(reference.ravel(), other.ravel()).reshape(-1, LANDMARK_VALUES)
+    np.testing.assert_allclose(paired[[25, 26], :2], reference[[25, 26], :2])
+    np.testing.assert_allclose(paired[0, :2], [5, 5])  # unpaired landmarks untouched
+
+
+def test_smoothing_keeps_straight_motion_removes_jitter_and_never_invents() -> None:
+    from glimpse.ingest.smoothing import smooth_keypoints
+
+    frames = np.arange(10)
+    straight = np.zeros((10, 2, 3))
+    straight[:, :, 0] = frames[:, None] * 3.0 + 7.0  # moving 3 px a frame
+    straight[:, :, 1] = 50.0
+    straight[:, :, 2] = 1.0
+    np.testing.assert_allclose(smooth_keypoints(frames, straight, 2), straight, atol=1e-9)
+    noisy = straight.copy()
+    noisy[:, :, 1] += np.where(frames % 2, 2.0, -2.0)[:, None]  # +-2 px jitter
+    smoothed = smooth_keypoints(frames, noisy, 2)
+    assert np.abs(smoothed[2:-2, :, 1] - 50.0).max() < np.abs(noisy[2:-2, :, 1] - 50.0).max() / 2
+    noisy[4, 0, 2] = 0.0
+    noisy[4, 0, :2] = 0.0
+    out = smooth_keypoints(frames, noisy, 2)
+    assert out[4, 0].tolist() == [0.0, 0.0, 0.0]  # missing stays missing
+    np.testing.assert_allclose(out[:, :, 2], noisy[:, :, 2])  # confidences untouched
+    np.testing.assert_allclose(smooth_keypoints(frames, noisy, 0), noisy)

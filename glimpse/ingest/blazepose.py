@@ -216,6 +216,19 @@ def unmirror(raw: np.ndarray, world: np.ndarray, segmentation: np.ndarray) -> tu
     return values.ravel(), points.ravel(), segmentation[:, ::-1]
 
 
+def pair_sides_like(reference: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """``other``'s landmarks ([39 * 5] raw values) with each left/right pair swapped where that brings them closer
+    to ``reference``'s: the model may call a side-on person's left what its mirrored run calls right, and
+    averaging across that would put a knee between the knees."""
+    ref, out = reference.reshape(-1, LANDMARK_VALUES), other.reshape(-1, LANDMARK_VALUES).copy()
+    for left, right in MIRROR_PAIRS:
+        kept = np.linalg.norm(ref[left, :2] - out[left, :2]) + np.linalg.norm(ref[right, :2] - out[right, :2])
+        swapped = np.linalg.norm(ref[left, :2] - out[right, :2]) + np.linalg.norm(ref[right, :2] - out[left, :2])
+        if swapped < kept:
+            out[[left, right]] = out[[right, left]]
+    return out.ravel()
+
+
 def _interpreter(path: Path, threads: int):
     try:
         from ai_edge_litert.interpreter import Interpreter
@@ -272,6 +285,6 @@ class BlazePose:
         if mirror_average:
             raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
             raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
-            raw, world = (raw + raw_m) / 2, (world + world_m) / 2
+            raw, world = (raw + pair_sides_like(raw, raw_m)) / 2, (world + world_m) / 2
             segmentation, score = (segmentation + segmentation_m) / 2, (score + score_m) / 2
         return decode_landmarks(raw, score, world, segmentation, region)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
@@ -13,6 +14,13 @@ class IngestConfig:
     max_frames: int
     fps: float | None
     threads: int
+    detector: Literal["blazepose", "onnx"]
+    detector_onnx_path: str | None
+    detector_onnx_kind: Literal["rtmdet", "yolox"]
+    detector_onnx_min_score: float
+    pose: Literal["blazepose", "onnx"]
+    pose_onnx_path: str | None
+    pose_onnx_box_padding: float
     detect_min_score: float
     detect_nms_iou: float
     detect_tiles: int
@@ -21,7 +29,8 @@ class IngestConfig:
     landmark_refine_heatmap: bool
     landmark_flip_average: bool
     landmark_refine_steps: int
-    track_duplicate_iou: float
+    track_same_person: float
+    track_covered_iou: float
     track_max_missing_frames: int
     track_reid_max_distance: float
     track_min_frames: int
@@ -34,7 +43,9 @@ class IngestConfig:
     motion_sample_frames: int
     motion_min_tracked_fraction: float
     mask_threshold: float
+    mask_body_radius: float
     keypoint_min_confidence: float
+    keypoint_smoothing_frames: int
     appearance_bins: int
     appearance_update: float
     preview: bool

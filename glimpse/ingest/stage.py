@@ -29,13 +29,15 @@ from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
 from glimpse.ingest.blazepose import BlazePose
 from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 from glimpse.ingest.report import (
     PersonTrack,
     preview_frames,
     report_table,
     tracks_report,
 )
-from glimpse.ingest.survey import Survey, survey_video
+from glimpse.ingest.smoothing import smooth_keypoints
+from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.tracker import Track, Tracker, depth_ordered_labels
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
@@ -52,6 +54,14 @@ REPORT_FILE = "ingest/tracks.json"
 def blazepose_folder(config: IngestConfig) -> Path:
     folder = Path(config.blazepose_dir)
     return folder if folder.is_absolute() else REPO_ROOT / folder
+
+
+def user_models(config: IngestConfig) -> tuple[OnnxDetector | None, OnnxPose | None]:
+    """The ONNX detector and pose model the parameters ask for (None: BlazePose's own)."""
+    detector = (OnnxDetector(config.detector_onnx_path, config.detector_onnx_kind, config.detector_onnx_min_score)
+                if config.detector == "onnx" else None)
+    pose = OnnxPose(config.pose_onnx_path, config.pose_onnx_box_padding) if config.pose == "onnx" else None
+    return detector, pose
 
 
 def _label_path(work: Path, frame_id: int) -> Path:
@@ -74,13 +84,13 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
-def _kept_people(tracks: list[Track], survey: Survey, min_frames: int) -> tuple[list[PersonTrack], int]:
-    """Tracks seen in at least ``min_frames`` frames, named p0, p1, ... in order of first appearance, their
-    keypoints and boxes in scene pixels."""
-    kept = sorted((t for t in tracks if len(t.frames) >= min_frames), key=lambda t: (t.frames[0], t.index))
+def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> tuple[list[PersonTrack], int]:
+    """Tracks seen in at least ``track_min_frames`` frames, named p0, p1, ... in order of first appearance, their
+    keypoints smoothed over time and, with their boxes, in scene pixels."""
+    kept = sorted((t for t in tracks if len(t.frames) >= config.track_min_frames), key=lambda t: (t.frames[0], t.index))
     people = []
     for k, track in enumerate(kept):
-        keypoints = np.stack(track.keypoints)
+        keypoints = smooth_keypoints(np.array(track.frames), np.stack(track.keypoints), config.keypoint_smoothing_frames)
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
         boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
@@ -117,23 +127,26 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     writer = SceneWriter(scene_dir, video.stem, survey.fps, motion)
     with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
         work = Path(work_dir)
-        tracker = Tracker(model, config, survey.plate)
+        tracker = Tracker(model, config, survey.plate, *user_models(config))
         track_started = time.perf_counter()
         track_size = (survey.track_width, survey.track_height)
         for frame_id, rgb in _chosen_frames(video, survey, "tracking people"):
             writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
             tracked = resized(rgb, track_size)
             observed = tracker.step(frame_id, tracked)
-            labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold)
+            labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius)
             cv2.imwrite(str(_label_path(work, frame_id)), labels)
         track_seconds = time.perf_counter() - track_started
-        people, dropped = _kept_people(tracker.tracks, survey, config.track_min_frames)
+        people, dropped = _kept_people(tracker.tracks, survey, config)
         if not people:
             shutil.rmtree(writer.staging, ignore_errors=True)
             raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
                                f"{config.track_min_frames} frames or more); Glimpse reconstructs people, so it "
                                "needs a video with at least one person in view")
         frame_ids = sorted(survey.chosen.values())
+        if survey.focal_35mm is not None and survey.static:  # a moving camera's K waits for stage 01's SfM
+            writer.input_cameras(survey.width, survey.height,
+                                 intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
         for person in people:
             writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints)
             for frame_id in person.frames:
@@ -147,6 +160,9 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
             "container_frames": survey.info.frame_count, "truncated": survey.truncated,
             "frame_limit": config.max_frames if survey.limited else None,
             "camera_motion": motion, "camera_motion_measure": survey.motion.motion,
+            "focal_35mm_equivalent": survey.focal_35mm,
+            "intrinsics": ("cameras.json from the container's focal length" if survey.focal_35mm and survey.static
+                           else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or SfM (moving)"),
             "seconds": {"total": None, "tracking": track_seconds},
             "tracking_fps": len(frame_ids) / max(track_seconds, 1e-9),
         }

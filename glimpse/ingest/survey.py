@@ -19,9 +19,11 @@ from tqdm import tqdm
 from glimpse.cameras.motion import MotionMeasure, measure_motion
 from glimpse.errors import GlimpseError
 from glimpse.ingest.config import IngestConfig
-from glimpse.io.video import VideoInfo, iter_video, probe_video
+from glimpse.io.video import VideoInfo, container_tags, iter_video, probe_video
 
 TIME_TOLERANCE_S = 1e-3  # a frame shown within a millisecond of a grid time counts as on it
+FULL_FRAME_DIAGONAL_MM = 43.2666  # a 35 mm film frame's diagonal: what "35 mm equivalent" focal lengths refer to
+FOCAL_35MM_TAGS = ("focal_length.35mm_equivalent", "focallengthin35mmformat")  # tag name endings (Apple, EXIF)
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class Survey:
     limited: bool  # ingest.max_frames cut the video short
     motion: MotionMeasure
     static: bool  # the measured motion is within ingest.motion_threshold
+    focal_35mm: float | None  # the container's 35 mm equivalent focal length (millimetres), when it gives one
     plate: np.ndarray | None  # [H, W, 3] uint8 per-pixel median of sampled frames (fixed camera), else None
 
 
@@ -59,6 +62,26 @@ def grid_choice(times: list[float], fps: float, max_frames: int) -> dict[int, in
         chosen.setdefault(index, k)
         k += 1
     return chosen
+
+
+def focal_from_tags(tags: dict[str, str]) -> float | None:
+    """The 35 mm equivalent focal length (mm) a container's tags give, if any."""
+    for key, value in tags.items():
+        if key.lower().endswith(FOCAL_35MM_TAGS):
+            try:
+                focal = float(value.split()[0])
+            except (ValueError, IndexError):
+                continue
+            if focal > 0:
+                return focal
+    return None
+
+
+def intrinsics_from_focal(focal_35mm: float, width: int, height: int) -> np.ndarray:
+    """[3, 3] K for a 35 mm equivalent focal length: focal / 43.27 mm of the image diagonal, square pixels,
+    principal point at the image centre (pixel centres at integers)."""
+    f = focal_35mm / FULL_FRAME_DIAGONAL_MM * float(np.hypot(width, height))
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
 
 
 def fitted_size(info: VideoInfo, max_side: int) -> tuple[int, int]:
@@ -106,4 +129,4 @@ def survey_video(path: Path, config: IngestConfig) -> Survey:
     plate = np.median(np.stack(samples), axis=0).astype(np.uint8) if static and len(samples) > 1 else None
     width, height = fitted_size(info, config.max_side)
     return Survey(info, width, height, *track_size, float(fps), chosen, len(times), truncated, limited, motion,
-                  static, plate)
+                  static, focal_from_tags(container_tags(path)), plate)

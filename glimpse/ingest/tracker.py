@@ -28,6 +28,7 @@ from scipy.optimize import linear_sum_assignment
 
 from glimpse.ingest.appearance import appearance, appearance_distance, blend
 from glimpse.ingest.blazepose import (
+    REGION_GROW,
     BlazePose,
     Detections,
     PoseLandmarks,
@@ -36,13 +37,22 @@ from glimpse.ingest.blazepose import (
 )
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
+from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
 # Bones (BlazePose landmark pairs) whose metric and pixel lengths give the depth proxy: shoulders-hips,
 # hips-knees, knees-ankles, shoulders-elbows, both sides.
 DEPTH_BONES = ((11, 23), (12, 24), (23, 25), (24, 26), (25, 27), (26, 28), (11, 13), (12, 14))
 MID_HIPS = (23, 24)
+MID_SHOULDERS = (11, 12)
+TORSO_POLYGON = (11, 12, 24, 23)
+# BlazePose landmark pairs drawn as the skeleton that decides contested mask pixels: head, arms, legs, feet.
+SKELETON_LIMBS = ((0, 11), (0, 12), (7, 8), (11, 13), (13, 15), (12, 14), (14, 16), (15, 19), (16, 20), (23, 25),
+                  (25, 27), (24, 26), (26, 28), (27, 29), (29, 31), (27, 31), (28, 30), (30, 32), (28, 32))
+SAME_PERSON_CONFIDENCE = 0.5  # body points both observations are sure of are compared ...
+SAME_PERSON_MIN_POINTS = 4  # ... when there are at least this many (else all 17)
 VELOCITY_SMOOTHING = 0.5  # weight of the newest displacement in a track's velocity
 UNMATCHED = 1e6  # assignment cost of a pair that must not match
+PAINT_GREY = 128  # what covers found people when a track looks behind them without a background plate
 
 
 @dataclass
@@ -50,9 +60,10 @@ class Observation:
     landmarks: PoseLandmarks
     probability: np.ndarray  # [H, W] float32 probability that a pixel shows this person
     mask: np.ndarray  # [H, W] bool, probability above the threshold
-    box: np.ndarray  # (4,) x0, y0, x1, y1 of the mask (or of the landmarks when the mask is empty)
+    box: np.ndarray  # (4,) x0, y0, x1, y1 of the landmarks inside the image
     look: np.ndarray  # [2, D] appearance (glimpse.ingest.appearance)
     depth: float  # depth proxy, metres per pixel (larger = farther)
+    keypoints: np.ndarray  # [17, 3] COCO-17 pixels and confidence (BlazePose's, or the ONNX pose model's)
 
 
 @dataclass
@@ -80,19 +91,42 @@ def depth_proxy(landmarks: PoseLandmarks) -> float:
     return float(np.sum(weight * metric) / max(np.sum(weight * pixels), 1e-6))
 
 
-def mask_iou(a: Observation, b: Observation) -> float:
-    """Intersection over union of two observations' masks (computed on their boxes' union)."""
-    x0, y0 = np.floor(np.minimum(a.box[:2], b.box[:2])).astype(int)
-    x1, y1 = np.ceil(np.maximum(a.box[2:], b.box[2:])).astype(int) + 1
-    x0, y0 = max(x0, 0), max(y0, 0)
-    ma, mb = a.mask[y0:y1, x0:x1], b.mask[y0:y1, x0:x1]
-    union = np.logical_or(ma, mb).sum()
-    return float(np.logical_and(ma, mb).sum() / union) if union else 0.0
+def torso_length(landmarks: PoseLandmarks) -> float:
+    """Pixels from the mid hip to the mid shoulder: the person's scale in the image."""
+    return float(max(np.linalg.norm(landmarks.points[list(MID_SHOULDERS)].mean(0)
+                                    - landmarks.points[list(MID_HIPS)].mean(0)), 1.0))
 
 
-def foreground_regions(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig
-                       ) -> list[Region]:
-    """Regions around connected pixels that differ from the plate and no observed person explains."""
+def same_person(a: PoseLandmarks, b: PoseLandmarks, threshold: float) -> bool:
+    """Whether two sets of landmarks describe one person: their body points (COCO-17, both confident) lie within
+    ``threshold`` torso lengths of each other on average. Masks cannot tell: the landmark model segments every
+    person in its crop, so two people who overlap have overlapping masks."""
+    points_a, confidence_a = a.coco17()
+    points_b, confidence_b = b.coco17()
+    both = (confidence_a > SAME_PERSON_CONFIDENCE) & (confidence_b > SAME_PERSON_CONFIDENCE)
+    if both.sum() < SAME_PERSON_MIN_POINTS:
+        both = np.ones_like(both)
+    distance = np.linalg.norm(points_a[both] - points_b[both], axis=1).mean()
+    return bool(distance < threshold * (torso_length(a) + torso_length(b)) / 2)
+
+
+def skeleton_distance(landmarks: PoseLandmarks, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] float32: each pixel's distance to the person's skeleton (limbs as lines, the torso filled), in torso
+    lengths."""
+    height, width = shape
+    skeleton = np.full((height, width), 255, np.uint8)
+    points = np.round(landmarks.points).astype(np.int32)
+    cv2.fillConvexPoly(skeleton, points[list(TORSO_POLYGON)], 0)
+    for a, b in SKELETON_LIMBS:
+        cv2.line(skeleton, tuple(points[a]), tuple(points[b]), 0, 1)
+    distance = cv2.distanceTransform(skeleton, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return distance / torso_length(landmarks)
+
+
+def foreground_regions(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig,
+                       person_side: float) -> list[Region]:
+    """Upright regions around connected pixels that differ from the plate and no observed person explains, at
+    least ``person_side`` pixels wide (a blob is often a part of a person: the rest is hidden or explained)."""
     difference = np.abs(image.astype(np.int16) - plate.astype(np.int16)).max(axis=2) > config.foreground_threshold
     difference &= ~explained
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -102,12 +136,18 @@ def foreground_regions(image: np.ndarray, plate: np.ndarray, explained: np.ndarr
     regions = []
     for x, y, w, h, area in stats[1:]:
         if area >= min_area:
-            regions.append(region_around_box(np.array([x, y, x + w - 1, y + h - 1], float), config.foreground_region_grow))
+            side = max(max(w, h) * config.foreground_region_grow, person_side)
+            regions.append(Region(np.array([x + (w - 1) / 2, y + (h - 1) / 2]), side, 0.0))
     return regions
 
 
-def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig) -> list[Region]:
-    """Landmark regions of the detector's people on the whole frame and on ``detect_tiles``^2 overlapping tiles."""
+def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig,
+                     detector: OnnxDetector | None = None) -> list[Region]:
+    """Landmark regions of the detected people: the user's ONNX detector's boxes, or BlazePose's detector on the
+    whole frame and on ``detect_tiles``^2 overlapping tiles."""
+    if detector is not None:
+        boxes, _ = detector(image)
+        return [region_around_box(box, REGION_GROW) for box in boxes]
     height, width = image.shape[:2]
     crops = [Region(np.array([(width - 1) / 2, (height - 1) / 2]), float(max(width, height)), 0.0)]
     tiles = config.detect_tiles
@@ -123,8 +163,12 @@ def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig) 
 class Tracker:
     """Runs the per-frame steps of the module docstring; ``tracks`` holds every track ever started."""
 
-    def __init__(self, model: BlazePose, config: IngestConfig, plate: np.ndarray | None):
+    def __init__(self, model: BlazePose, config: IngestConfig, plate: np.ndarray | None,
+                 detector: OnnxDetector | None = None, pose: OnnxPose | None = None):
+        """detector: finds new people instead of BlazePose's detector; pose: gives the keypoints instead of
+        BlazePose's landmarks (BlazePose still follows and segments everyone)."""
         self.model, self.config, self.plate = model, config, plate
+        self.detector, self.pose = detector, pose
         self.tracks: list[Track] = []
 
     # ------------------------------------------------------------------ one person in one region
@@ -142,14 +186,13 @@ class Tracker:
         height, width = image.shape[:2]
         probability = paste_to_image(found.segmentation, found.region, width, height)
         mask = probability > config.mask_threshold
-        if mask.any():
-            ys, xs = np.nonzero(mask)
-            box = np.array([xs.min(), ys.min(), xs.max(), ys.max()], float)
-        else:
-            box = np.concatenate([found.points.min(0), found.points.max(0)])
+        inside = found.points[found.presence > config.landmark_min_presence]
+        inside = inside if len(inside) else found.points
+        box = np.concatenate([inside.min(0), inside.max(0)])
         split = float(found.points[list(MID_HIPS), 1].mean())
+        points, confidence = found.coco17()
         return Observation(found, probability, mask, box, appearance(image, mask, split, config.appearance_bins),
-                           depth_proxy(found))
+                           depth_proxy(found), np.concatenate([points, confidence[:, None]], 1))
 
     # ------------------------------------------------------------------ one frame
     def step(self, frame_id: int, image: np.ndarray) -> list[tuple[Track, Observation]]:
@@ -161,7 +204,8 @@ class Tracker:
             observation = self.observe(image, track.predicted_region())
             if observation is not None:
                 followed[track.index] = observation
-        self._resolve_duplicates(followed)
+        for index in self._resolve_duplicates(followed):
+            self._look_behind(image, followed, next(t for t in live if t.index == index))
         fresh = self._find_new(image, list(followed.values()))
         assigned = self._assign(fresh, [t for t in live if t.index not in followed], frame_id)
         for track, observation in assigned:
@@ -172,39 +216,71 @@ class Tracker:
             if observation is None:
                 track.missing += 1
                 continue
+            if self.pose is not None:
+                points, scores = self.pose(image, observation.box)
+                observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
             self._update(track, observation, frame_id)
             result.append((track, observation))
         return result
 
-    def _resolve_duplicates(self, followed: dict[int, Observation]) -> None:
+    def _resolve_duplicates(self, followed: dict[int, Observation]) -> list[int]:
+        """Drop the worse of two observations of one person; returns the tracks that lost theirs."""
         tracks = {t.index: t for t in self.tracks}
+        losers = []
         indices = sorted(followed)
         for i, a in enumerate(indices):
             for b in indices[i + 1:]:
                 if a not in followed or b not in followed:
                     continue
-                if mask_iou(followed[a], followed[b]) <= self.config.track_duplicate_iou:
+                if not same_person(followed[a].landmarks, followed[b].landmarks, self.config.track_same_person):
                     continue
                 cost_a = appearance_distance(tracks[a].look, followed[a].look)
                 cost_b = appearance_distance(tracks[b].look, followed[b].look)
-                del followed[b if cost_a <= cost_b else a]
+                loser = b if cost_a <= cost_b else a
+                del followed[loser]
+                losers.append(loser)
+        return losers
+
+    def _body_pixels(self, observation: Observation) -> np.ndarray:
+        """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
+        the segmentation also covers other people in the crop)."""
+        near = skeleton_distance(observation.landmarks, observation.mask.shape) < self.config.mask_body_radius
+        return observation.mask & near
+
+    def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
+        """A track whose region slid onto someone already found looks again with the found people painted over
+        (by the background plate, else grey): the person hidden behind them, if still visible, is who remains."""
+        hidden = np.zeros(image.shape[:2], bool)
+        for observation in followed.values():
+            hidden |= self._body_pixels(observation)
+        painted = image.copy()
+        painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
+        observation = self.observe(painted, track.predicted_region())
+        if observation is None or any(same_person(observation.landmarks, other.landmarks, self.config.track_same_person)
+                                      for other in followed.values()):
+            return
+        followed[track.index] = observation
 
     def _find_new(self, image: np.ndarray, observed: list[Observation]) -> list[Observation]:
-        candidates = detector_regions(self.model, image, self.config)
-        if self.plate is not None:
+        candidates = [(region, True) for region in detector_regions(self.model, image, self.config, self.detector)]
+        if self.plate is not None:  # unexplained foreground: never covered by a found person, by construction
             explained = np.zeros(image.shape[:2], bool)
             for observation in observed:
-                explained |= observation.probability > self.config.mask_threshold / 2
-            candidates += foreground_regions(image, self.plate, explained, self.config)
+                explained |= self._body_pixels(observation)
+            sides = [t.region.side for t in self.tracks if t.missing == 0]
+            person_side = float(np.median(sides)) if sides else 0.0
+            candidates += [(region, False) for region in
+                           foreground_regions(image, self.plate, explained, self.config, person_side)]
         fresh: list[Observation] = []
-        for region in candidates:
-            boxes = np.array([o.box for o in observed + fresh]).reshape(-1, 4)
-            if len(boxes) and box_iou(region.box()[None], boxes).max() > self.config.track_duplicate_iou:
+        for region, may_be_covered in candidates:
+            boxes = np.array([o.landmarks.region.box() for o in observed + fresh]).reshape(-1, 4)
+            if may_be_covered and len(boxes) and box_iou(region.box()[None], boxes).max() > self.config.track_covered_iou:
                 continue
             observation = self.observe(image, region)
             if observation is None:
                 continue
-            if any(mask_iou(observation, other) > self.config.track_duplicate_iou for other in observed + fresh):
+            if any(same_person(observation.landmarks, other.landmarks, self.config.track_same_person)
+                   for other in observed + fresh):
                 continue
             fresh.append(observation)
         return fresh
@@ -245,7 +321,7 @@ class Tracker:
         track.region = landmarks.next_region
         track.missing = 0
         track.look = blend(track.look, observation.look, config.appearance_update)
-        points, confidence = landmarks.coco17()
+        points, confidence = observation.keypoints[:, :2], observation.keypoints[:, 2]
         height, width = observation.mask.shape
         inside = (points[:, 0] >= -0.5) & (points[:, 0] <= width - 0.5) & (points[:, 1] >= -0.5) & (points[:, 1] <= height - 0.5)
         confidence = np.where(inside, confidence, 0.0)
@@ -256,9 +332,25 @@ class Tracker:
 
 
 def depth_ordered_labels(observations: list[tuple[Track, Observation]], shape: tuple[int, int],
-                         threshold: float) -> np.ndarray:
-    """[H, W] uint16: 0 for nobody, else 1 + the index of the track that owns the pixel, nearest first."""
+                         threshold: float, body_radius: float) -> np.ndarray:
+    """[H, W] uint16: 0 for nobody, else 1 + the index of the track that owns the pixel.
+
+    A pixel claimed by one person's segmentation is theirs. Where several claim it (the landmark model segments
+    every person in its crop), the nearest person (depth proxy) whose skeleton lies within ``body_radius`` torso
+    lengths takes it (their body hides whoever is behind); otherwise the person whose skeleton is nearest."""
     labels = np.zeros(shape, np.uint16)
-    for track, observation in sorted(observations, key=lambda pair: pair[1].depth):
-        labels[(observation.probability > threshold) & (labels == 0)] = track.index + 1
+    if not observations:
+        return labels
+    ordered = sorted(observations, key=lambda pair: pair[1].depth)
+    claims = np.stack([o.probability > threshold for _, o in ordered])
+    count = claims.sum(0)
+    ids = np.array([t.index + 1 for t, _ in ordered], np.uint16)
+    labels[count == 1] = ids[np.argmax(claims[:, count == 1], axis=0)]
+    contested = count > 1
+    if contested.any():
+        distance = np.stack([skeleton_distance(o.landmarks, shape)[contested] for _, o in ordered])
+        distance = np.where(claims[:, contested], distance, np.inf)
+        on_body = distance < body_radius
+        front = np.where(on_body.any(0), np.argmax(on_body, axis=0), np.argmin(distance, axis=0))
+        labels[contested] = ids[front]
     return labels

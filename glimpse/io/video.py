@@ -132,3 +132,30 @@ def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterato
             index += 1
     finally:
         capture.release()
+
+
+def container_tags(path: str | Path) -> dict[str, str]:
+    """The container's and streams' metadata tags (``key: value``), as the bundled ffmpeg prints them (OpenCV does
+    not expose them); empty when ffmpeg is unavailable. Later tags of the same key win."""
+    import subprocess
+
+    try:
+        import imageio_ffmpeg
+
+        printed = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)],
+                                 capture_output=True, text=True, errors="replace", timeout=60, check=False).stderr
+    except (ImportError, RuntimeError, OSError, subprocess.TimeoutExpired):
+        return {}
+    tags: dict[str, str] = {}
+    depth = None
+    for line in printed.splitlines():
+        indent = len(line) - len(line.lstrip())
+        if line.strip() == "Metadata:":
+            depth = indent
+            continue
+        if depth is not None and indent > depth and ":" in line:
+            key, value = line.split(":", 1)
+            tags[key.strip()] = value.strip()
+        else:
+            depth = None
+    return tags
