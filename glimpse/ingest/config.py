@@ -31,6 +31,7 @@ class IngestConfig:
     landmark_refine_steps: int
     track_same_person: float
     track_covered_iou: float
+    track_part_scale: float
     track_max_missing_frames: int
     track_reid_max_distance: float
     track_min_frames: int

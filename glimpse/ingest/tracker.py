@@ -4,18 +4,20 @@ Per frame (BlazePose's own scheme, extended to several people):
 
 1. **Follow.** Every track looks for its person in the region its last landmarks predicted (moved by the
    track's velocity); the landmark model's presence score says whether the person is still there.
-2. **Find.** Candidate regions come from the pose detector on the whole frame and on overlapping tiles (small
-   people), and, for a fixed camera, from pixels that differ from the background plate and no followed person
-   explains (people seen from behind, whom the face-keyed detector misses). A candidate that no followed
-   person covers is looked at by the landmark model.
-3. **Resolve.** Two observations of the same pixels (a track that slid onto another person at a crossing, or a
-   candidate that is a followed person) keep the one whose appearance matches its track best; the other
-   track is hidden this frame.
+2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
+   someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
+   behind*: its region again with the people already found painted over by the background plate (grey for a
+   moving camera), which leaves whoever they hide.
+3. **Find.** Candidate regions come from the pose detector (BlazePose's on the whole frame and on overlapping
+   tiles for small people, or the user's ONNX detector), and, for a fixed camera, from pixels that differ
+   from the background plate and no found person's body explains (people seen from behind, whom the
+   face-keyed detector misses). A candidate no found person covers is looked at by the landmark model.
 4. **Re-identify.** New observations are matched to hidden and lost tracks by appearance (Hungarian method);
    what stays unmatched starts a new track.
 
-Masks are depth-ordered: each frame's people are ranked by a depth proxy (metric bone lengths from the
-landmark model's 3D output over their lengths in pixels) and the nearest takes the pixels it claims first.
+Masks are depth-ordered (:func:`depth_ordered_labels`): people are ranked by a depth proxy (metric bone
+lengths from the landmark model's 3D output over their lengths in pixels); a pixel several segmentations
+claim goes to the nearest person whose skeleton passes close to it, else to the closest skeleton.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ SKELETON_LIMBS = ((0, 11), (0, 12), (7, 8), (11, 13), (13, 15), (12, 14), (14, 1
                   (25, 27), (24, 26), (26, 28), (27, 29), (29, 31), (27, 31), (28, 30), (30, 32), (28, 32))
 SAME_PERSON_CONFIDENCE = 0.5  # body points both observations are sure of are compared ...
 SAME_PERSON_MIN_POINTS = 4  # ... when there are at least this many (else all 17)
+PART_INSIDE = 0.9  # share of a small observation's landmark box inside a larger one's that makes it a piece of it
 VELOCITY_SMOOTHING = 0.5  # weight of the newest displacement in a track's velocity
 UNMATCHED = 1e6  # assignment cost of a pair that must not match
 PAINT_GREY = 128  # what covers found people when a track looks behind them without a background plate
@@ -108,6 +111,23 @@ def same_person(a: PoseLandmarks, b: PoseLandmarks, threshold: float) -> bool:
         both = np.ones_like(both)
     distance = np.linalg.norm(points_a[both] - points_b[both], axis=1).mean()
     return bool(distance < threshold * (torso_length(a) + torso_length(b)) / 2)
+
+
+def part_of(small: Observation, large: Observation, max_scale: float) -> bool:
+    """Whether ``small`` is a piece of ``large``'s person taken for a whole person (a face the detector found,
+    fitted as a tiny body): at most ``max_scale`` of its torso length, its landmark box inside the other's."""
+    if torso_length(small.landmarks) > max_scale * torso_length(large.landmarks):
+        return False
+    lo, hi = np.maximum(small.box[:2], large.box[:2]), np.minimum(small.box[2:], large.box[2:])
+    inside = np.prod(np.clip(hi - lo, 0, None))
+    area = np.prod(np.clip(small.box[2:] - small.box[:2], 1e-6, None))
+    return bool(inside / area > PART_INSIDE)
+
+
+def one_person(a: Observation, b: Observation, config: IngestConfig) -> bool:
+    """Whether two observations show one person: the same body, or one a piece of the other."""
+    return (part_of(a, b, config.track_part_scale) or part_of(b, a, config.track_part_scale)
+            or same_person(a.landmarks, b.landmarks, config.track_same_person))
 
 
 def skeleton_distance(landmarks: PoseLandmarks, shape: tuple[int, int]) -> np.ndarray:
@@ -224,7 +244,8 @@ class Tracker:
         return result
 
     def _resolve_duplicates(self, followed: dict[int, Observation]) -> list[int]:
-        """Drop the worse of two observations of one person; returns the tracks that lost theirs."""
+        """Of two observations of one person drop the piece (a part taken for a person), or the one whose
+        appearance matches its track worse; returns the tracks that lost theirs."""
         tracks = {t.index: t for t in self.tracks}
         losers = []
         indices = sorted(followed)
@@ -232,11 +253,17 @@ class Tracker:
             for b in indices[i + 1:]:
                 if a not in followed or b not in followed:
                     continue
-                if not same_person(followed[a].landmarks, followed[b].landmarks, self.config.track_same_person):
+                seen_a, seen_b = followed[a], followed[b]
+                if part_of(seen_a, seen_b, self.config.track_part_scale):
+                    loser = a  # a piece of b's person
+                elif part_of(seen_b, seen_a, self.config.track_part_scale):
+                    loser = b
+                elif same_person(seen_a.landmarks, seen_b.landmarks, self.config.track_same_person):
+                    cost_a = appearance_distance(tracks[a].look, seen_a.look)
+                    cost_b = appearance_distance(tracks[b].look, seen_b.look)
+                    loser = b if cost_a <= cost_b else a
+                else:
                     continue
-                cost_a = appearance_distance(tracks[a].look, followed[a].look)
-                cost_b = appearance_distance(tracks[b].look, followed[b].look)
-                loser = b if cost_a <= cost_b else a
                 del followed[loser]
                 losers.append(loser)
         return losers
@@ -256,8 +283,7 @@ class Tracker:
         painted = image.copy()
         painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
         observation = self.observe(painted, track.predicted_region())
-        if observation is None or any(same_person(observation.landmarks, other.landmarks, self.config.track_same_person)
-                                      for other in followed.values()):
+        if observation is None or any(one_person(observation, other, self.config) for other in followed.values()):
             return
         followed[track.index] = observation
 
@@ -279,8 +305,7 @@ class Tracker:
             observation = self.observe(image, region)
             if observation is None:
                 continue
-            if any(same_person(observation.landmarks, other.landmarks, self.config.track_same_person)
-                   for other in observed + fresh):
+            if any(one_person(observation, other, self.config) for other in observed + fresh):
                 continue
             fresh.append(observation)
         return fresh
