@@ -113,71 +113,83 @@ def _scene_labels(labels: np.ndarray, people: list[PersonTrack], survey: Survey)
     return out
 
 
+def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: float) -> dict:
+    """The video's facts and the ingest's timings, for the tracks report."""
+    static_with_focal = survey.focal_35mm is not None and survey.static
+    return {
+        "video": str(video), "video_size": [survey.info.width, survey.info.height],
+        "rotation_deg": survey.info.rotation_deg, "scene_size": [survey.width, survey.height],
+        "tracking_size": [survey.track_width, survey.track_height],
+        "fps": survey.fps, "frames": len(survey.chosen), "decoded_frames": survey.decoded,
+        "container_frames": survey.info.frame_count, "truncated": survey.truncated,
+        "frame_limit": config.max_frames if survey.limited else None,
+        "camera_motion": "static" if survey.static else "moving", "camera_motion_measure": survey.motion.motion,
+        "focal_35mm_equivalent": survey.focal_35mm,
+        "intrinsics": ("cameras.json from the container's focal length" if static_with_focal
+                       else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or SfM (moving)"),
+        "seconds": {"tracking": track_seconds},
+        "tracking_fps": len(survey.chosen) / max(track_seconds, 1e-9),
+    }
+
+
 def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     """Ingest ``video`` into ``scene_dir`` (see the module docstring); returns the tracks report."""
     video, scene_dir = Path(video), Path(scene_dir)
     started = time.perf_counter()
     survey = survey_video(video, config)
     model = BlazePose(blazepose_folder(config), config.threads)
-    motion = "static" if survey.static else "moving"
-    log.info("%s: %dx%d at %.3g fps -> %d frames at %dx%d, camera %s (motion %.3g of the diagonal)", video,
+    user_detector, user_pose = user_models(config)
+    log.info("%s: %dx%d at %.3g fps -> %d frames at %dx%d, camera motion %.3g of the diagonal", video,
              survey.info.width, survey.info.height, survey.fps, len(survey.chosen), survey.width, survey.height,
-             motion, survey.motion.motion)
+             survey.motion.motion)
     scene_dir.parent.mkdir(parents=True, exist_ok=True)
-    writer = SceneWriter(scene_dir, video.stem, survey.fps, motion)
-    with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
-        work = Path(work_dir)
-        tracker = Tracker(model, config, survey.plate, *user_models(config))
-        track_started = time.perf_counter()
-        track_size = (survey.track_width, survey.track_height)
-        for frame_id, rgb in _chosen_frames(video, survey, "tracking people"):
-            writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
-            tracked = resized(rgb, track_size)
-            observed = tracker.step(frame_id, tracked)
-            labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius)
-            cv2.imwrite(str(_label_path(work, frame_id)), labels)
-        track_seconds = time.perf_counter() - track_started
-        people, dropped = _kept_people(tracker.tracks, survey, config)
-        if not people:
-            shutil.rmtree(writer.staging, ignore_errors=True)
-            raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
-                               f"{config.track_min_frames} frames or more); Glimpse reconstructs people, so it "
-                               "needs a video with at least one person in view")
-        frame_ids = sorted(survey.chosen.values())
-        if survey.focal_35mm is not None and survey.static:  # a moving camera's K waits for stage 01's SfM
-            writer.input_cameras(survey.width, survey.height,
-                                 intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
-        for person in people:
-            writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints)
-            for frame_id in person.frames:
-                labels = cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
-                writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
-        facts = {
-            "video": str(video), "video_size": [survey.info.width, survey.info.height],
-            "rotation_deg": survey.info.rotation_deg, "scene_size": [survey.width, survey.height],
-            "tracking_size": [survey.track_width, survey.track_height],
-            "fps": survey.fps, "frames": len(frame_ids), "decoded_frames": survey.decoded,
-            "container_frames": survey.info.frame_count, "truncated": survey.truncated,
-            "frame_limit": config.max_frames if survey.limited else None,
-            "camera_motion": motion, "camera_motion_measure": survey.motion.motion,
-            "focal_35mm_equivalent": survey.focal_35mm,
-            "intrinsics": ("cameras.json from the container's focal length" if survey.focal_35mm and survey.static
-                           else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or SfM (moving)"),
-            "seconds": {"total": None, "tracking": track_seconds},
-            "tracking_fps": len(frame_ids) / max(track_seconds, 1e-9),
-        }
-        if config.preview:
-            frames = ((fid, resized(rgb, (survey.width, survey.height)),
-                       _scene_labels(cv2.imread(str(_label_path(work, fid)), cv2.IMREAD_UNCHANGED), people, survey))
-                      for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
-            write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
-                      survey.fps)
-        facts["seconds"]["total"] = time.perf_counter() - started
-        report = tracks_report(people, dropped, facts)
-        write_json(writer.side_file(REPORT_FILE), report)
-        writer.finish()
+    writer = SceneWriter(scene_dir, video.stem, survey.fps, "static" if survey.static else "moving")
+    try:
+        with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
+            report = _track_and_write(video, survey, config, writer, Path(work_dir),
+                                      Tracker(model, config, survey.plate, user_detector, user_pose))
+            report["seconds"]["total"] = time.perf_counter() - started
+            write_json(writer.side_file(REPORT_FILE), report)
+            writer.finish()
+    except BaseException:
+        shutil.rmtree(writer.staging, ignore_errors=True)  # a previous scene at scene_dir stays as it was
+        raise
     _announce(video, scene_dir, survey, report, config)
     return report
+
+
+def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: SceneWriter, work: Path,
+                     tracker: Tracker) -> dict:
+    """Passes 2 and 3 (see the module docstring) into ``writer``; returns the tracks report."""
+    track_started = time.perf_counter()
+    track_size = (survey.track_width, survey.track_height)
+    for frame_id, rgb in _chosen_frames(video, survey, "tracking people"):
+        writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
+        tracked = resized(rgb, track_size)
+        observed = tracker.step(frame_id, tracked)
+        labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius)
+        cv2.imwrite(str(_label_path(work, frame_id)), labels)
+    track_seconds = time.perf_counter() - track_started
+    people, dropped = _kept_people(tracker.tracks, survey, config)
+    if not people:
+        raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
+                           f"{config.track_min_frames} frames or more); Glimpse reconstructs people, so it "
+                           "needs a video with at least one person in view")
+    if survey.focal_35mm is not None and survey.static:  # a moving camera's K waits for stage 01's SfM
+        writer.input_cameras(survey.width, survey.height,
+                             intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
+    for person in people:
+        writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints)
+        for frame_id in person.frames:
+            labels = cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
+            writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
+    if config.preview:
+        frames = ((fid, resized(rgb, (survey.width, survey.height)),
+                   _scene_labels(cv2.imread(str(_label_path(work, fid)), cv2.IMREAD_UNCHANGED), people, survey))
+                  for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
+        write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
+                  survey.fps)
+    return tracks_report(people, dropped, _facts(video, survey, config, track_seconds))
 
 
 def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:
