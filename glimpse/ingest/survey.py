@@ -10,6 +10,7 @@ holds only a bounded sample of frames (for the plate and the motion measure), at
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import ceil
 from pathlib import Path
 
 import cv2
@@ -22,6 +23,7 @@ from glimpse.ingest.config import IngestConfig
 from glimpse.io.video import VideoInfo, container_tags, iter_video, probe_video
 
 TIME_TOLERANCE_S = 1e-3  # a frame shown within a millisecond of a grid time counts as on it
+TRUNCATED_SHARE = 0.9  # decoding fewer than this share of the frames the container lists means a cut file
 FULL_FRAME_DIAGONAL_MM = 43.2666  # a 35 mm film frame's diagonal: what "35 mm equivalent" focal lengths refer to
 FOCAL_35MM_TAGS = ("focal_length.35mm_equivalent", "focallengthin35mmformat")  # tag name endings (Apple, EXIF)
 
@@ -98,7 +100,10 @@ def survey_video(path: Path, config: IngestConfig) -> Survey:
         raise GlimpseError(f"{path}: the container gives no frame rate; set ingest.fps")
     track_size = fitted_size(info, config.track_max_side)
     stop_after_s = (config.max_frames - 1) / fps + 1.0 / fps  # no need to decode beyond the last kept grid time
-    sample_every = max(1, int(np.ceil(max(info.frame_count, 1) / config.plate_frames)))
+    expected = ceil(stop_after_s * (info.fps or fps)) + 1  # frames decoded before the frame limit stops the pass
+    if info.frame_count > 0:
+        expected = min(expected, info.frame_count)
+    sample_every = max(1, ceil(expected / config.plate_frames))
     times: list[float] = []
     samples: list[np.ndarray] = []
     limited = False
@@ -119,7 +124,7 @@ def survey_video(path: Path, config: IngestConfig) -> Survey:
         raise GlimpseError(f"{path}: the video has no decodable frame")
     chosen = grid_choice(times, fps, config.max_frames)
     limited = limited or len(chosen) >= config.max_frames
-    truncated = not limited and info.frame_count > 0 and len(times) < info.frame_count * 0.9
+    truncated = not limited and info.frame_count > 0 and len(times) < info.frame_count * TRUNCATED_SHARE
     greys = [cv2.cvtColor(s, cv2.COLOR_RGB2GRAY) for s in samples]
     picks = list(range(1, len(greys)))
     if len(picks) > config.motion_sample_frames:
