@@ -28,9 +28,6 @@ class Region:
         corners = crop_to_image(self, np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]), 1)
         return np.concatenate([corners.min(0), corners.max(0)])
 
-    def scaled(self, factor: float) -> Region:
-        return Region(self.centre, self.side * factor, self.angle)
-
 
 def crop_affine(region: Region, crop_size: int) -> np.ndarray:
     """[2, 3] affine map from crop pixels (0 .. crop_size - 1, centres) to image pixels."""
