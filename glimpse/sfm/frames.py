@@ -15,6 +15,7 @@ from tqdm import tqdm
 from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name, read_rgb, write_png
+from glimpse.io.video import iter_video
 from glimpse.scene import Scene
 
 
@@ -43,19 +44,19 @@ def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, o
     out_dir.mkdir(parents=True, exist_ok=True)
     written: dict[int, Path] = {}
     if scene.video_path is not None:
-        wanted = set(frame_ids)
-        capture = cv2.VideoCapture(str(scene.video_path))
-        try:
-            for index in tqdm(range(max(frame_ids) + 1), desc="decoding video", unit="frame", leave=False):
-                ok, bgr = capture.read()
-                if not ok:
-                    raise GlimpseError(f"{scene.video_path}: the video ended at frame {index}, expected {max(frame_ids) + 1} frames")
-                if index in wanted:
-                    path = out_dir / f"{frame_name(index)}.png"
-                    write_png(path, undistorter.image(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)))
-                    written[index] = path
-        finally:
-            capture.release()
+        wanted, last = set(frame_ids), max(frame_ids)
+        decoded = 0
+        for index, _seconds, rgb in tqdm(iter_video(scene.video_path), desc="decoding video", unit="frame",
+                                         leave=False, total=last + 1):
+            decoded = index + 1
+            if index in wanted:
+                path = out_dir / f"{frame_name(index)}.png"
+                write_png(path, undistorter.image(rgb))
+                written[index] = path
+            if index >= last:
+                break
+        if decoded <= last:
+            raise GlimpseError(f"{scene.video_path}: the video ended at frame {decoded}, expected {last + 1} frames")
         return written
     for fid in tqdm(frame_ids, desc="frames", unit="frame", leave=False):
         src = scene.frame_paths[fid]
