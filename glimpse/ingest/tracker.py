@@ -67,6 +67,7 @@ class Observation:
     look: np.ndarray  # [2, D] appearance (glimpse.ingest.appearance)
     depth: float  # depth proxy, metres per pixel (larger = farther)
     keypoints: np.ndarray  # [17, 3] COCO-17 pixels and confidence (BlazePose's, or the ONNX pose model's)
+    body: np.ndarray | None = None  # [H, W] bool, Tracker._body_pixels, computed once when first needed
 
 
 @dataclass
@@ -271,8 +272,10 @@ class Tracker:
     def _body_pixels(self, observation: Observation) -> np.ndarray:
         """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
         the segmentation also covers other people in the crop)."""
-        near = skeleton_distance(observation.landmarks, observation.mask.shape) < self.config.mask_body_radius
-        return observation.mask & near
+        if observation.body is None:
+            near = skeleton_distance(observation.landmarks, observation.mask.shape) < self.config.mask_body_radius
+            observation.body = observation.mask & near
+        return observation.body
 
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
         """A track whose region slid onto someone already found looks again with the found people painted over
