@@ -217,3 +217,41 @@ def test_smoothing_keeps_straight_motion_removes_jitter_and_never_invents() -> N
     assert out[4, 0].tolist() == [0.0, 0.0, 0.0]  # missing stays missing
     np.testing.assert_allclose(out[:, :, 2], noisy[:, :, 2])  # confidences untouched
     np.testing.assert_allclose(smooth_keypoints(frames, noisy, 0), noisy)
+
+
+# --- tracks behind other people -------------------------------------------------------------------------------
+
+def _landmarks_at(points: np.ndarray, region: Region):
+    from glimpse.ingest.blazepose import BODY_LANDMARKS, PoseLandmarks
+
+    return PoseLandmarks(points=points, visibility=np.ones(BODY_LANDMARKS), presence=np.ones(BODY_LANDMARKS),
+                         world=np.zeros((BODY_LANDMARKS, 3)), score=1.0, next_region=region,
+                         segmentation=np.zeros((LANDMARK_SIZE, LANDMARK_SIZE)), region=region)
+
+
+def test_a_hidden_track_is_expected_where_its_velocity_takes_it() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.tracker import Track
+
+    region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
+    track = Track(0, region, np.zeros((2, 4)), velocity=np.array([5.0, -1.0]), missing=2)
+    assert track.predicted_landmarks() is None  # never observed
+    track.landmarks = _landmarks_at(np.tile([100.0, 100.0], (BODY_LANDMARKS, 1)), region)
+    np.testing.assert_allclose(track.predicted_landmarks().points, np.tile([115.0, 97.0], (BODY_LANDMARKS, 1)))
+    np.testing.assert_allclose(track.predicted_region().centre, [115.0, 97.0])
+
+
+def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.tracker import Observation, Track, Tracker
+
+    def track(index: int, x: float) -> Track:
+        return Track(index, Region(np.array([x, 100.0]), 80.0, 0.0), np.zeros((2, 4)))
+
+    found_region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
+    found = Observation(_landmarks_at(np.zeros((BODY_LANDMARKS, 2)), found_region), np.zeros((1, 1)),
+                        np.zeros((1, 1), bool), np.zeros(4), np.zeros((2, 4)), 1.0, np.zeros((17, 3)))
+    live = [track(0, 100.0), track(1, 150.0), track(2, 400.0)]  # 0 is the one found; 1 overlaps it; 2 is far
+    tracker = Tracker.__new__(Tracker)
+    assert tracker._hidden_by_others(live, {0: found}) == {1}
+    assert tracker._hidden_by_others(live, {}) == set()

@@ -32,7 +32,7 @@ def test_smpl_topology_uses_the_standard_vertex_ids(tmp_path):
     rng = np.random.default_rng(0)
     out = model(torch.as_tensor(rng.normal(size=(2, 10))), torch.as_tensor(rng.normal(0, 0.3, (2, 3))),
                 torch.as_tensor(rng.normal(0, 0.2, (2, 69))), torch.as_tensor(rng.normal(size=(2, 3))))
-    for layout in LAYOUTS:
+    for layout in sorted(set(LAYOUTS) - {"coco17_skin"}):  # SMPL has no built-in limb landmarks
         kmap = keypoint_map(layout, model.data)
         kp = kmap(out.joints, out.vertices)
         names = list(kmap.names)
@@ -68,3 +68,31 @@ def test_unknown_layout_and_missing_landmarks_are_clear(tmp_path):
     np.savez(path, **arrays)
     with pytest.raises(GlimpseError, match="needs landmark_names"):
         keypoint_map("coco17", load_body_model_file(path))
+
+
+def test_skin_layout_sits_near_the_joints_it_annotates():
+    """coco17_skin (anny's COCO regressor) lies within a few centimetres of the joint centres coco17 uses."""
+    data = load_body_model_file(FREE_BODY)
+    model = BodyModel(data, dtype=torch.float64)
+    out = model(torch.zeros(1, 10, dtype=torch.float64), torch.zeros(1, 3, dtype=torch.float64),
+                torch.zeros(1, 69, dtype=torch.float64))
+    joints = keypoint_map("coco17", data)(out.joints, out.vertices)[0]
+    skin = keypoint_map("coco17_skin", data)(out.joints, out.vertices)[0]
+    gap = (skin - joints).norm(dim=-1)
+    assert torch.allclose(gap[:5], torch.zeros(5, dtype=torch.float64))  # face points are the same landmarks
+    assert 0.003 < gap[5:].min() and gap[5:].max() < 0.05
+    left, right = skin[5::2], skin[6::2]
+    assert (left[:, 0] > right[:, 0]).all()  # left points on the body's left (+x)
+
+
+def test_skin_layout_needs_the_limb_landmarks(tmp_path):
+    arrays = dict(np.load(FREE_BODY))
+    keep = [k for k, n in enumerate(arrays["landmark_names"]) if "_" not in n or n.split("_")[1] in {"eye", "ear", "big", "small", "heel"}]
+    for key in ("landmark_names", "landmark_indices", "landmark_weights"):
+        arrays[key] = arrays[key][keep]
+    path = tmp_path / "faces_only.npz"
+    np.savez(path, **arrays)
+    data = load_body_model_file(path)
+    keypoint_map("coco17", data)  # joint-centre limbs need no limb landmarks
+    with pytest.raises(GlimpseError, match="coco17_skin keypoints need the surface landmarks left_shoulder"):
+        keypoint_map("coco17_skin", data)

@@ -19,7 +19,8 @@ file is committed, so no run of the pipeline needs anny. What this does:
    the samples have unit root-mean-square; J_regressor = for each joint,
    non-negative weights (summing to 1) over the nearest vertices that reproduce
    the joint across all samples; pose correctives zero.
-4. Landmarks for keypoints (nose, eyes, ears, toes, heels) from anny's COCO
+4. Landmarks for keypoints (nose, eyes, ears, toes, heels, and the twelve
+   limb points as COCO annotators place them on the skin) from anny's COCO
    whole-body keypoint regressor; named shape presets (tall, child-like, ...)
    projected into the shape space.
 """
@@ -84,7 +85,9 @@ PRESETS = {
     "man": {"gender": 0.0},
 }
 LANDMARKS = ("nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_big_toe", "left_small_toe",
-             "left_heel", "right_big_toe", "right_small_toe", "right_heel")
+             "left_heel", "right_big_toe", "right_small_toe", "right_heel", "left_shoulder", "right_shoulder",
+             "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee",
+             "right_knee", "left_ankle", "right_ankle")
 NUM_BETAS = 10
 NUM_POSE_FEATURES = 207
 REGRESSOR_NEIGHBOURS = 400  # vertices considered for each joint's regressor (all around the joint)
@@ -175,7 +178,7 @@ def fit_joint_regressor(template: np.ndarray, vertices: np.ndarray, joints: np.n
 
 
 def landmarks(model, anny) -> tuple[np.ndarray, np.ndarray]:
-    """(11, M) vertex indices and weights of each landmark (padded with weight 0)."""
+    """(len(LANDMARKS), M) vertex indices and weights of each landmark (padded with weight 0)."""
     regressor = anny.KeypointsRegressor.coco(model)
     rows = [regressor.regression_weights[regressor.labels.index(name)].numpy() for name in LANDMARKS]
     width = max(int((r > 0).sum()) for r in rows)

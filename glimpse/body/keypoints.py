@@ -1,5 +1,5 @@
 """Keypoints of the body in the layouts detectors and ControlNet use: COCO-17,
-OpenPose BODY-25 and OpenPose-18.
+OpenPose BODY-25 and OpenPose-18, and COCO-17 as annotators mark it on the skin.
 
 A keypoint is either a combination of the body's posed joints (shoulders,
 elbows, wrists, hips, knees, ankles, neck, mid-hip) or a surface landmark: a
@@ -14,6 +14,10 @@ weighted set of vertices (nose, eyes, ears, toes, heels). Choices:
 - Landmarks: for the official SMPL topology the vertex ids used across the
   field (smplx's ``vertex_ids``); for the free body, anny's COCO whole-body
   keypoint regressor, stored in the model file by tools/make_free_body.py.
+- ``coco17_skin``: all seventeen COCO points as surface landmarks (the free
+  body's file carries the limb points too). This is what a keypoint detector
+  trained on human annotations returns, so detectors are measured against it;
+  SMPL's topology has no built-in limb landmarks.
 """
 
 from __future__ import annotations
@@ -44,14 +48,17 @@ Source = int | tuple[int, int] | str
 NECK: Source = (L_SHOULDER, R_SHOULDER)
 MID_HIP: Source = (L_HIP, R_HIP)
 
+COCO17_ENTRIES: tuple[tuple[str, Source], ...] = (
+    ("nose", "nose"), ("left_eye", "left_eye"), ("right_eye", "right_eye"), ("left_ear", "left_ear"),
+    ("right_ear", "right_ear"), ("left_shoulder", L_SHOULDER), ("right_shoulder", R_SHOULDER),
+    ("left_elbow", L_ELBOW), ("right_elbow", R_ELBOW), ("left_wrist", L_WRIST), ("right_wrist", R_WRIST),
+    ("left_hip", L_HIP), ("right_hip", R_HIP), ("left_knee", L_KNEE), ("right_knee", R_KNEE),
+    ("left_ankle", L_ANKLE), ("right_ankle", R_ANKLE),
+)
+
 LAYOUTS: dict[str, tuple[tuple[str, Source], ...]] = {
-    "coco17": (
-        ("nose", "nose"), ("left_eye", "left_eye"), ("right_eye", "right_eye"), ("left_ear", "left_ear"),
-        ("right_ear", "right_ear"), ("left_shoulder", L_SHOULDER), ("right_shoulder", R_SHOULDER),
-        ("left_elbow", L_ELBOW), ("right_elbow", R_ELBOW), ("left_wrist", L_WRIST), ("right_wrist", R_WRIST),
-        ("left_hip", L_HIP), ("right_hip", R_HIP), ("left_knee", L_KNEE), ("right_knee", R_KNEE),
-        ("left_ankle", L_ANKLE), ("right_ankle", R_ANKLE),
-    ),
+    "coco17": COCO17_ENTRIES,
+    "coco17_skin": tuple((name, name) for name, _ in COCO17_ENTRIES),
     "openpose25": (
         ("nose", "nose"), ("neck", NECK), ("right_shoulder", R_SHOULDER), ("right_elbow", R_ELBOW),
         ("right_wrist", R_WRIST), ("left_shoulder", L_SHOULDER), ("left_elbow", L_ELBOW), ("left_wrist", L_WRIST),
@@ -116,11 +123,15 @@ def body_landmarks(data: BodyModelData) -> dict[str, tuple[np.ndarray, np.ndarra
 
 
 def keypoint_map(layout: str, data: BodyModelData) -> KeypointMap:
-    """The keypoint map of ``layout`` (coco17 | openpose25 | openpose18) for a body model file."""
+    """The keypoint map of ``layout`` (coco17 | coco17_skin | openpose25 | openpose18) for a body model file."""
     if layout not in LAYOUTS:
         raise ValueError(f"unknown keypoint layout {layout!r}; known: {', '.join(LAYOUTS)}")
     landmarks = body_landmarks(data)
     entries = LAYOUTS[layout]
+    missing = [s for _, s in entries if isinstance(s, str) and s not in landmarks]
+    if missing:
+        raise GlimpseError(f"{data.source}: the {layout} keypoints need the surface landmarks {', '.join(missing)}, "
+                           "which this body model file does not carry (the free body has them)")
     width = max(len(landmarks[s][0]) for _, s in entries if isinstance(s, str))
     joint_weights = np.zeros((len(entries), NUM_JOINTS))
     vertex_indices = np.zeros((len(entries), width), np.int64)

@@ -7,7 +7,10 @@ Per frame (BlazePose's own scheme, extended to several people):
 2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
    someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
    behind*: its region again with the people already found painted over by the background plate (grey for a
-   moving camera), which leaves whoever they hide.
+   moving camera), which leaves whoever they hide. A track that found nobody while its region overlaps
+   someone found looks behind too. Only the found people's pixels nearer to their own skeleton than to where
+   the hidden person's skeleton is expected (the last one moved by the velocity) are painted, and a track
+   that was already missing takes what it finds only if it looks as it did.
 3. **Find.** Candidate regions come from the pose detector (BlazePose's on the whole frame and on overlapping
    tiles for small people, or the user's ONNX detector), and, for a fixed camera, from pixels that differ
    from the background plate and no found person's body explains (people seen from behind, whom the
@@ -22,7 +25,7 @@ claim goes to the nearest person whose skeleton passes close to it, else to the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -68,6 +71,7 @@ class Observation:
     depth: float  # depth proxy, metres per pixel (larger = farther)
     keypoints: np.ndarray  # [17, 3] COCO-17 pixels and confidence (BlazePose's, or the ONNX pose model's)
     body: np.ndarray | None = None  # [H, W] bool, Tracker._body_pixels, computed once when first needed
+    skeleton_distance: np.ndarray | None = None  # [H, W] float32 torso lengths, computed once when first needed
 
 
 @dataclass
@@ -82,9 +86,16 @@ class Track:
     boxes: list[np.ndarray] = field(default_factory=list)
     reidentified: list[tuple[int, float]] = field(default_factory=list)  # (frame id, appearance distance)
     jumps: list[int] = field(default_factory=list)  # frame ids where the box jumped (suspected switches)
+    landmarks: PoseLandmarks | None = None  # the last observation's
 
     def predicted_region(self) -> Region:
         return Region(self.region.centre + self.velocity * (1 + self.missing), self.region.side, self.region.angle)
+
+    def predicted_landmarks(self) -> PoseLandmarks | None:
+        """The last landmarks moved on by the track's velocity to this frame."""
+        if self.landmarks is None:
+            return None
+        return replace(self.landmarks, points=self.landmarks.points + self.velocity * (1 + self.missing))
 
 
 def depth_proxy(landmarks: PoseLandmarks) -> float:
@@ -225,8 +236,10 @@ class Tracker:
             observation = self.observe(image, track.predicted_region())
             if observation is not None:
                 followed[track.index] = observation
-        for index in self._resolve_duplicates(followed):
-            self._look_behind(image, followed, next(t for t in live if t.index == index))
+        behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
+        for track in live:
+            if track.index in behind:
+                self._look_behind(image, followed, track)
         fresh = self._find_new(image, list(followed.values()))
         assigned = self._assign(fresh, [t for t in live if t.index not in followed], frame_id)
         for track, observation in assigned:
@@ -269,12 +282,25 @@ class Tracker:
                 losers.append(loser)
         return losers
 
+    def _hidden_by_others(self, live: list[Track], followed: dict[int, Observation]) -> set[int]:
+        """Tracks not seen this frame whose predicted region overlaps the region of someone found: the person may
+        be behind them, where the landmark model sees two people in one crop and gives up."""
+        regions = np.array([o.landmarks.region.box() for o in followed.values()]).reshape(-1, 4)
+        if not len(regions):
+            return set()
+        return {t.index for t in live if t.index not in followed
+                and box_iou(t.predicted_region().box()[None], regions).max() > 0}
+
+    def _skeleton_distance(self, observation: Observation) -> np.ndarray:
+        if observation.skeleton_distance is None:
+            observation.skeleton_distance = skeleton_distance(observation.landmarks, observation.mask.shape)
+        return observation.skeleton_distance
+
     def _body_pixels(self, observation: Observation) -> np.ndarray:
         """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
         the segmentation also covers other people in the crop)."""
         if observation.body is None:
-            near = skeleton_distance(observation.landmarks, observation.mask.shape) < self.config.mask_body_radius
-            observation.body = observation.mask & near
+            observation.body = observation.mask & (self._skeleton_distance(observation) < self.config.mask_body_radius)
         return observation.body
 
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
@@ -283,11 +309,18 @@ class Tracker:
         hidden = np.zeros(image.shape[:2], bool)
         for observation in followed.values():
             hidden |= self._body_pixels(observation)
+        expected = track.predicted_landmarks()
+        if expected is not None:  # pixels nearer to where this person should be than to anyone found stay
+            own = skeleton_distance(expected, hidden.shape)
+            nearest_found = np.min([self._skeleton_distance(o) for o in followed.values()], axis=0)
+            hidden &= nearest_found <= own
         painted = image.copy()
         painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
         observation = self.observe(painted, track.predicted_region())
         if observation is None or any(one_person(observation, other, self.config) for other in followed.values()):
             return
+        if track.missing and appearance_distance(track.look, observation.look) > self.config.track_reid_max_distance:
+            return  # someone else was behind them: a lost track comes back only as it looked
         followed[track.index] = observation
 
     def _find_new(self, image: np.ndarray, observed: list[Observation]) -> list[Observation]:
@@ -347,6 +380,7 @@ class Tracker:
             if jump > config.track_switch_distance * max(previous[3] - previous[1], 1.0) * (1 + track.missing):
                 track.jumps.append(frame_id)
         track.region = landmarks.next_region
+        track.landmarks = landmarks
         track.missing = 0
         track.look = blend(track.look, observation.look, config.appearance_update)
         points, confidence = observation.keypoints[:, :2], observation.keypoints[:, 2]
