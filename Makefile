@@ -72,15 +72,17 @@ models: $(MODELS_DIR)/.installed
 need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene (or VIDEO=clip.mp4) is required))
 need-video = $(if $(VIDEO),,$(error VIDEO=path/to/video is required))
 
-# The scene of a video, ingested again only when the video is newer (make ingest forces it).
+# The scene of a video, ingested again only when the video is newer (make ingest forces it). PARAMS reach the
+# ingest through GLIMPSE_PARAMS.
+ingest-video = $(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)"
 ifneq ($(VIDEO),)
 $(SCENE)/scene.yaml: $(VIDEO) | venv models
-	$(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)" --params "$(PARAMS)"
+	$(ingest-video)
 endif
 
 ingest: venv models
 	$(need-video)
-	$(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)" --params "$(PARAMS)"
+	$(ingest-video)
 
 all: venv $(if $(VIDEO),$(SCENE)/scene.yaml)
 	$(need-scene)

@@ -43,35 +43,36 @@ PCK_FRACTION = 0.1
 JOINT_MASK_REACH_PX = 2  # a joint counts as visible when the person's visible mask is within this many pixels
 
 
-def true_people(scene_dir: Path, layout: str) -> dict[int, dict[str, TruePerson]]:
-    """Frame id -> pid -> the true visible mask and COCO-17 points (``layout``: coco17_skin | coco17) of a
-    fixture scene."""
+def true_people(scene_dir: Path, layouts: tuple[str, ...]) -> dict[str, dict[int, dict[str, TruePerson]]]:
+    """Layout (coco17_skin | coco17) -> frame id -> pid -> the true visible mask and COCO-17 points of a fixture
+    scene."""
     truth_dir = scene_dir.with_name(scene_dir.name + ".groundtruth")
     scene = load_scene(scene_dir)
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
-    coco = keypoint_map(layout, model.data)
+    maps = {layout: keypoint_map(layout, model.data) for layout in layouts}
     cameras = json.loads((scene_dir / "cameras.json").read_text())
     K = np.array(cameras["K"])
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * JOINT_MASK_REACH_PX + 1,) * 2)
-    out: dict[int, dict[str, TruePerson]] = {}
+    out: dict[str, dict[int, dict[str, TruePerson]]] = {layout: {} for layout in layouts}
     for pid in scene.humans:
         body = np.load(truth_dir / f"{pid}_body.npz")
         for fid in scene.frame_ids:
             with torch.no_grad():
                 posed = model(torch.as_tensor(body["betas"])[None], torch.as_tensor(body["global_orient"][fid:fid + 1]),
                               torch.as_tensor(body["body_pose"][fid:fid + 1]), torch.as_tensor(body["transl"][fid:fid + 1]))
-            joints = coco(posed.joints, posed.vertices)[0].numpy()
-            pose = cameras["frames"][f"{fid:06d}"]
-            cam = joints @ np.array(pose["R"]).T + np.array(pose["t"])
-            uv = cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
             mask = read_mask(scene_dir / "humans" / pid / "masks" / f"{fid:06d}.png")
             grown = cv2.dilate(mask.astype(np.uint8), kernel) > 0
             h, w = mask.shape
-            px = np.round(uv).astype(int)
-            inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
-            visible = inside.copy()
-            visible[inside] = grown[px[inside, 1], px[inside, 0]]
-            out.setdefault(fid, {})[pid] = TruePerson(mask, uv, visible)
+            pose = cameras["frames"][f"{fid:06d}"]
+            for layout, coco in maps.items():
+                joints = coco(posed.joints, posed.vertices)[0].numpy()
+                cam = joints @ np.array(pose["R"]).T + np.array(pose["t"])
+                uv = cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
+                px = np.round(uv).astype(int)
+                inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+                visible = inside.copy()
+                visible[inside] = grown[px[inside, 1], px[inside, 0]]
+                out[layout].setdefault(fid, {})[pid] = TruePerson(mask, uv, visible)
     return out
 
 
@@ -97,8 +98,9 @@ def run(scenario: str, size: str, seed: int, work: Path) -> list[dict]:
     ingested = work / f"{fixture.name}.ingested"
     report = ingest(video, ingested, load_ingest_config())
     found = found_people(ingested)
-    scores = score_people(true_people(fixture, "coco17_skin"), found, PCK_FRACTION)
-    joint_scores = score_people(true_people(fixture, "coco17"), found, PCK_FRACTION)
+    truth = true_people(fixture, ("coco17_skin", "coco17"))
+    scores = score_people(truth["coco17_skin"], found, PCK_FRACTION)
+    joint_scores = score_people(truth["coco17"], found, PCK_FRACTION)
     people = max(len(report["people"]), 1)
     rows = []
     for pid, s in scores.items():

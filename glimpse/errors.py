@@ -27,31 +27,35 @@ class Violation:
         return f"{self.file}: {self.rule}; found {self.found}"
 
 
-class SceneError(GlimpseError):
-    """A scene folder breaks the glimpse-scene/1 contract; lists every violation."""
+class _SceneViolations(GlimpseError):
+    """A scene with problems: "scene ROOT <what> (N problem(s)):", one line per violation, then a hint."""
+
+    what = ""
+    hint = ""
 
     def __init__(self, scene_root: str, violations: list[Violation]):
         self.scene_root = scene_root
         self.violations = list(violations)
-        lines = [f"scene {scene_root} breaks glimpse-scene/1 ({len(self.violations)} problem(s)):"]
+        lines = [f"scene {scene_root} {self.what} ({len(self.violations)} problem(s)):"]
         lines += [f"  - {v}" for v in self.violations]
-        lines.append("  (see docs/SCENE_FORMAT.md)")
+        lines.append(f"  ({self.hint})")
         super().__init__("\n".join(lines))
+
+
+class SceneError(_SceneViolations):
+    """A scene folder breaks the glimpse-scene/1 contract; lists every violation."""
+
+    what = "breaks glimpse-scene/1"
+    hint = "see docs/SCENE_FORMAT.md"
 
 
 class ConfigError(GlimpseError):
     """A parameter is unknown, mistyped or out of range."""
 
 
-class SceneNotRunnable(GlimpseError):
+class SceneNotRunnable(_SceneViolations):
     """A scene that is valid glimpse-scene/1 but that the pipeline cannot run; lists what is missing."""
 
-    def __init__(self, scene_root: str, violations: list[Violation]):
-        self.scene_root = scene_root
-        self.violations = list(violations)
-        lines = [f"scene {scene_root} is valid glimpse-scene/1, but the pipeline cannot run it "
-                 f"({len(self.violations)} problem(s)):"]
-        lines += [f"  - {v}" for v in self.violations]
-        lines.append(("  (a video with nothing else becomes a scene the pipeline can run with "
-                      "`glimpse ingest VIDEO SCENE_DIR`, or `make all VIDEO=clip.mp4`; docs/ingest.md)"))
-        super().__init__("\n".join(lines))
+    what = "is valid glimpse-scene/1, but the pipeline cannot run it"
+    hint = ("a video with nothing else becomes a scene the pipeline can run with `glimpse ingest VIDEO SCENE_DIR`, "
+            "or `make all VIDEO=clip.mp4`; docs/ingest.md")

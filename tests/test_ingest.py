@@ -164,7 +164,8 @@ def test_ingest_finds_and_follows_each_true_person(demo_video, ingested) -> None
 
     fixture, _ = demo_video
     scene_dir, _ = ingested
-    scores = score_people(true_people(fixture, "coco17_skin"), found_people(scene_dir), pck_fraction=0.2)
+    truth = true_people(fixture, ("coco17_skin",))["coco17_skin"]
+    scores = score_people(truth, found_people(scene_dir), pck_fraction=0.2)
     assert sorted(scores) == ["p0", "p1"]
     found_as = [s.ids for s in scores.values()]
     for pid, score in scores.items():

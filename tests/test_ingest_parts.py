@@ -234,9 +234,8 @@ def test_a_hidden_track_is_expected_where_its_velocity_takes_it() -> None:
     from glimpse.ingest.tracker import Track
 
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
-    track = Track(0, region, np.zeros((2, 4)), velocity=np.array([5.0, -1.0]), missing=2)
-    assert track.predicted_landmarks() is None  # never observed
-    track.landmarks = _landmarks_at(np.tile([100.0, 100.0], (BODY_LANDMARKS, 1)), region)
+    landmarks = _landmarks_at(np.tile([100.0, 100.0], (BODY_LANDMARKS, 1)), region)
+    track = Track(0, landmarks, np.zeros((2, 4)), velocity=np.array([5.0, -1.0]), missing=2)
     np.testing.assert_allclose(track.predicted_landmarks().points, np.tile([115.0, 97.0], (BODY_LANDMARKS, 1)))
     np.testing.assert_allclose(track.predicted_region().centre, [115.0, 97.0])
 
@@ -246,7 +245,8 @@ def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:
     from glimpse.ingest.tracker import Observation, Track, Tracker
 
     def track(index: int, x: float) -> Track:
-        return Track(index, Region(np.array([x, 100.0]), 80.0, 0.0), np.zeros((2, 4)))
+        region = Region(np.array([x, 100.0]), 80.0, 0.0)
+        return Track(index, _landmarks_at(np.zeros((BODY_LANDMARKS, 2)), region), np.zeros((2, 4)))
 
     found_region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
     found = Observation(_landmarks_at(np.zeros((BODY_LANDMARKS, 2)), found_region), np.zeros((1, 1)),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -58,4 +57,3 @@ def test_a_scene_without_people_is_refused(tmp_path: Path) -> None:
     assert len(runnable_violations(root)) == 1
     with pytest.raises(SceneNotRunnable, match="no person"):
         prepare_run(root, tmp_path / "out", whole_pipeline=True)
-    shutil.rmtree(root / "humans")

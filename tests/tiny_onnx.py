@@ -51,12 +51,6 @@ def _export(module: torch.nn.Module, shape: tuple[int, ...], path: Path, outputs
     return str(path)
 
 
-def _export(module: torch.nn.Module, shape: tuple[int, ...], path: Path, outputs: list[str]) -> str:
-    torch.onnx.export(module, (torch.zeros(shape),), str(path), dynamo=False, input_names=["input"],
-                      output_names=outputs)
-    return str(path)
-
-
 def bright_box_detector(path: Path) -> str:
     return _export(_BrightBoxDetector(), (1, 3, DET_SIZE, DET_SIZE), path, ["dets", "labels"])
 

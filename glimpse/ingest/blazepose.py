@@ -81,9 +81,6 @@ class Detections:
     def __len__(self) -> int:
         return len(self.scores)
 
-    def take(self, index: np.ndarray) -> Detections:
-        return Detections(self.boxes[index], self.points[index], self.scores[index])
-
     @staticmethod
     def concatenate(parts: list[Detections]) -> Detections:
         if not parts:

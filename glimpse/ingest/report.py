@@ -42,12 +42,12 @@ def draw_frame(image: np.ndarray, labels: np.ndarray, people: list[PersonTrack],
     out = image.copy()
     thickness = max(1, round(max(image.shape[:2]) / 400))
     for k, person in enumerate(people):
+        if frame_id not in person.frames:  # nobody found: the person has no pixels in ``labels`` either
+            continue
         colour = person_colour(k)
         mask = (labels == person.label).astype(np.uint8)
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         cv2.drawContours(out, contours, -1, colour, thickness)
-        if frame_id not in person.frames:
-            continue
         t = person.frames.index(frame_id)
         x0, y0, x1, y1 = np.round(person.boxes[t]).astype(int)
         cv2.rectangle(out, (x0, y0), (x1, y1), colour, thickness)

@@ -19,11 +19,11 @@ import logging
 import shutil
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
@@ -41,7 +41,7 @@ from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.tracker import Track, Tracker, depth_ordered_labels
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
-from glimpse.io.video import iter_video, resized, write_mp4
+from glimpse.io.video import iter_video_frames, resized, write_mp4
 from glimpse.scene.writer import SceneWriter
 
 log = logging.getLogger("glimpse")
@@ -68,14 +68,10 @@ def _label_path(work: Path, frame_id: int) -> Path:
     return work / f"{frame_name(frame_id)}.png"
 
 
-def _chosen_frames(path: Path, survey: Survey, desc: str):
+def _chosen_frames(path: Path, survey: Survey, desc: str) -> Iterator[tuple[int, np.ndarray]]:
     """(scene frame id, [H, W, 3] uint8 at the decoded size) of the survey's chosen frames, decoded again."""
-    last = max(survey.chosen)
-    for index, _seconds, rgb in tqdm(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
-        if index in survey.chosen:
-            yield survey.chosen[index], rgb
-        if index >= last:
-            return
+    for index, rgb in iter_video_frames(path, survey.chosen, desc):
+        yield survey.chosen[index], rgb
 
 
 def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from glimpse.cameras.motion import MotionMeasure, measure_motion
+from glimpse.cameras.motion import MotionMeasure, measure_motion, sample_ids
 from glimpse.errors import GlimpseError
 from glimpse.ingest.config import IngestConfig
 from glimpse.io.video import VideoInfo, container_tags, iter_video, probe_video
@@ -125,11 +125,11 @@ def survey_video(path: Path, config: IngestConfig) -> Survey:
     chosen = grid_choice(times, fps, config.max_frames)
     limited = limited or len(chosen) >= config.max_frames
     truncated = not limited and info.frame_count > 0 and len(times) < info.frame_count * TRUNCATED_SHARE
-    greys = [cv2.cvtColor(s, cv2.COLOR_RGB2GRAY) for s in samples]
-    picks = list(range(1, len(greys)))
-    if len(picks) > config.motion_sample_frames:
-        picks = sorted({picks[round(i)] for i in np.linspace(0, len(picks) - 1, config.motion_sample_frames)})
-    motion = measure_motion(greys[0], [(i, greys[i]) for i in picks], config.motion_min_tracked_fraction)
+    def grey(rgb: np.ndarray) -> np.ndarray:
+        return cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+
+    picks = sample_ids(list(range(len(samples))), config.motion_sample_frames)
+    motion = measure_motion(grey(samples[0]), [(i, grey(samples[i])) for i in picks], config.motion_min_tracked_fraction)
     static = motion.motion <= config.motion_threshold
     plate = np.median(np.stack(samples), axis=0).astype(np.uint8) if static and len(samples) > 1 else None
     width, height = fitted_size(info, config.max_side)

@@ -77,7 +77,7 @@ class Observation:
 @dataclass
 class Track:
     index: int
-    region: Region
+    landmarks: PoseLandmarks  # the last observation's
     look: np.ndarray
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     missing: int = 0  # consecutive frames without an observation
@@ -86,15 +86,17 @@ class Track:
     boxes: list[np.ndarray] = field(default_factory=list)
     reidentified: list[tuple[int, float]] = field(default_factory=list)  # (frame id, appearance distance)
     jumps: list[int] = field(default_factory=list)  # frame ids where the box jumped (suspected switches)
-    landmarks: PoseLandmarks | None = None  # the last observation's
+
+    @property
+    def region(self) -> Region:
+        """Where the last landmarks say this person will be looked for next."""
+        return self.landmarks.next_region
 
     def predicted_region(self) -> Region:
         return Region(self.region.centre + self.velocity * (1 + self.missing), self.region.side, self.region.angle)
 
-    def predicted_landmarks(self) -> PoseLandmarks | None:
+    def predicted_landmarks(self) -> PoseLandmarks:
         """The last landmarks moved on by the track's velocity to this frame."""
-        if self.landmarks is None:
-            return None
         return replace(self.landmarks, points=self.landmarks.points + self.velocity * (1 + self.missing))
 
 
@@ -304,16 +306,15 @@ class Tracker:
         return observation.body
 
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
-        """A track whose region slid onto someone already found looks again with the found people painted over
-        (by the background plate, else grey): the person hidden behind them, if still visible, is who remains."""
+        """A track whose region slid onto, or overlaps, someone already found looks again with the found people
+        painted over (by the background plate, else grey) where they are nearer to their own skeleton than to the
+        track's expected one: the person hidden behind them, if still visible, is who remains."""
         hidden = np.zeros(image.shape[:2], bool)
         for observation in followed.values():
             hidden |= self._body_pixels(observation)
-        expected = track.predicted_landmarks()
-        if expected is not None:  # pixels nearer to where this person should be than to anyone found stay
-            own = skeleton_distance(expected, hidden.shape)
-            nearest_found = np.min([self._skeleton_distance(o) for o in followed.values()], axis=0)
-            hidden &= nearest_found <= own
+        # pixels nearer to where this person should be than to anyone found stay
+        own = skeleton_distance(track.predicted_landmarks(), hidden.shape)
+        hidden &= np.min([self._skeleton_distance(o) for o in followed.values()], axis=0) <= own
         painted = image.copy()
         painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
         observation = self.observe(painted, track.predicted_region())
@@ -364,7 +365,7 @@ class Tracker:
         for r, observation in enumerate(fresh):
             if r in matched:
                 continue
-            track = Track(len(self.tracks), observation.landmarks.next_region, observation.look)
+            track = Track(len(self.tracks), observation.landmarks, observation.look)
             self.tracks.append(track)
             pairs.append((track, observation))
         return pairs
@@ -379,7 +380,6 @@ class Tracker:
             jump = np.linalg.norm((observation.box[:2] + observation.box[2:]) / 2 - (previous[:2] + previous[2:]) / 2)
             if jump > config.track_switch_distance * max(previous[3] - previous[1], 1.0) * (1 + track.missing):
                 track.jumps.append(frame_id)
-        track.region = landmarks.next_region
         track.landmarks = landmarks
         track.missing = 0
         track.look = blend(track.look, observation.look, config.appearance_update)

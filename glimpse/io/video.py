@@ -8,12 +8,13 @@ one black row or column at the bottom or right (never scaled, so pixels keep the
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from glimpse.errors import GlimpseError
 
@@ -132,6 +133,19 @@ def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterato
             index += 1
     finally:
         capture.release()
+
+
+def iter_video_frames(path: str | Path, wanted: Collection[int], desc: str) -> Iterator[tuple[int, np.ndarray]]:
+    """(decode index, [H, W, 3] uint8 RGB) of the ``wanted`` decode indices of ``path``, in order, with a progress
+    bar; decoding stops after the last one. Raises GlimpseError when the video ends before it."""
+    last, decoded = max(wanted), 0
+    for index, _seconds, rgb in tqdm(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
+        decoded = index + 1
+        if index in wanted:
+            yield index, rgb
+        if index >= last:
+            return
+    raise GlimpseError(f"{path}: the video ended at frame {decoded}, expected {last + 1} frames")
 
 
 def container_tags(path: str | Path) -> dict[str, str]:

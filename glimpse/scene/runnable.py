@@ -7,8 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from glimpse.errors import SceneNotRunnable, Violation
-
-BODY_SOURCES = ("smpl.npz", "keypoints2d.npz", "keypoints3d.npz")  # what stage 02 fits or takes a body from
+from glimpse.scene.validate_humans import PERSON_FILES
 
 
 def runnable_violations(root: str | Path) -> list[Violation]:
@@ -20,7 +19,7 @@ def runnable_violations(root: str | Path) -> list[Violation]:
                                      "nobody in the scene stages 02-07 have nothing to do", "no person")]
     violations = []
     for person in persons:
-        if not any((person / name).is_file() for name in BODY_SOURCES):
+        if not any((person / name).is_file() for name in PERSON_FILES):  # what stage 02 places a body from
             found = "only masks/" if (person / "masks").is_dir() else "none of them"
             violations.append(Violation(f"humans/{person.name}/", "a person needs smpl.npz, keypoints2d.npz or "
                                         "keypoints3d.npz: stage 02 places the body from them, masks alone cannot",

@@ -15,7 +15,7 @@ from tqdm import tqdm
 from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name, read_rgb, write_png
-from glimpse.io.video import iter_video
+from glimpse.io.video import iter_video_frames
 from glimpse.scene import Scene
 
 
@@ -44,19 +44,10 @@ def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, o
     out_dir.mkdir(parents=True, exist_ok=True)
     written: dict[int, Path] = {}
     if scene.video_path is not None:
-        wanted, last = set(frame_ids), max(frame_ids)
-        decoded = 0
-        for index, _seconds, rgb in tqdm(iter_video(scene.video_path), desc="decoding video", unit="frame",
-                                         leave=False, total=last + 1):
-            decoded = index + 1
-            if index in wanted:
-                path = out_dir / f"{frame_name(index)}.png"
-                write_png(path, undistorter.image(rgb))
-                written[index] = path
-            if index >= last:
-                break
-        if decoded <= last:
-            raise GlimpseError(f"{scene.video_path}: the video ended at frame {decoded}, expected {last + 1} frames")
+        for index, rgb in iter_video_frames(scene.video_path, set(frame_ids), "decoding video"):
+            path = out_dir / f"{frame_name(index)}.png"
+            write_png(path, undistorter.image(rgb))
+            written[index] = path
         return written
     for fid in tqdm(frame_ids, desc="frames", unit="frame", leave=False):
         src = scene.frame_paths[fid]
