@@ -87,14 +87,20 @@ def found_people(scene_dir: Path) -> dict[int, dict[str, FoundPerson]]:
     return out
 
 
-def run(scenario: str, size: str, seed: int, work: Path) -> list[dict]:
+def fixture_video(scenario: str, size: str, seed: int, work: Path) -> tuple[Path, Path]:
+    """(fixture scene folder, its frames as an H.264 video) in ``work``, made only when not already there."""
     fixture = work / f"{scenario}_{size}_s{seed}"
     if not (fixture / "scene.yaml").exists():
         make_scene(scenario, fixture, size, seed)
-    scene = load_scene(fixture)
     video = work / f"{fixture.name}.mp4"
     if not video.exists():
+        scene = load_scene(fixture)
         write_mp4(video, (read_rgb(scene.frame_paths[f]) for f in scene.frame_ids), scene.fps)
+    return fixture, video
+
+
+def run(scenario: str, size: str, seed: int, work: Path) -> list[dict]:
+    fixture, video = fixture_video(scenario, size, seed, work)
     ingested = work / f"{fixture.name}.ingested"
     report = ingest(video, ingested, load_ingest_config())
     found = found_people(ingested)

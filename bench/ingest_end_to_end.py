@@ -29,11 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from glimpse.fixtures.scenes import make_scene  # noqa: E402
+from bench.ingest import fixture_video  # noqa: E402
 from glimpse.ingest.config import load_ingest_config  # noqa: E402
 from glimpse.ingest.stage import ingest  # noqa: E402
 from glimpse.io.images import read_mask, read_rgb  # noqa: E402
-from glimpse.io.video import resized, write_mp4  # noqa: E402
+from glimpse.io.video import resized  # noqa: E402
 from glimpse.scene import SceneWriter, load_scene, read_keypoints2d  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -102,13 +102,7 @@ def main() -> None:
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-e2e-"))
     work.mkdir(parents=True, exist_ok=True)
-    fixture = work / f"{SCENARIO}_{SIZE}_s{args.seed}"
-    if not (fixture / "scene.yaml").exists():
-        make_scene(SCENARIO, fixture, SIZE, args.seed)
-    scene = load_scene(fixture)
-    video = work / f"{fixture.name}.mp4"
-    if not video.exists():
-        write_mp4(video, (read_rgb(scene.frame_paths[f]) for f in scene.frame_ids), scene.fps)
+    fixture, video = fixture_video(SCENARIO, SIZE, args.seed, work)
     from dataclasses import replace
 
     ingested = work / "ingested"
