@@ -8,6 +8,11 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
 Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes.
 
+People are fitted together (02_smpl_fit.ground: one floor for everyone with a static camera;
+`--ground off` fits each alone); a second table per size gives, per scene, the 2D fits' error
+with no alignment, the error of pelvis-to-pelvis distances, how often the depth order of two
+people agrees with the truth, and fitting seconds per person per 100 frames.
+
 Then "scenes not seen": `demo` and `crowd` with another seed (other looks and body shapes),
 2D keypoints only (mode auto), each person's pose prior fitted to the built-in motions other
 than the one that person performs (leave one out). Per person: sequence-aligned error, and how
@@ -34,7 +39,8 @@ from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import joint_errors  # noqa: E402
+from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
+from glimpse.fit.floor_fit import place_on_common_floor  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
 from glimpse.fixtures.mesh_render import Mesh, render_meshes  # noqa: E402
 from glimpse.fixtures.scenes import FREE_BODY, KEYPOINT_DROP_RATE, SCENARIOS as FIXTURES, make_scene  # noqa: E402
@@ -43,7 +49,7 @@ from glimpse.scene import load_scene  # noqa: E402
 
 THREADS = 2
 SEED = 0
-SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "crowd")
+SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "crowd", "adult_child", "crouch")
 TOTAL_DROP = 0.3
 CONDITIONS = ("clean", "noisy", "noisy-30%")
 UNSEEN_SCENARIOS = ("demo", "crowd")
@@ -74,9 +80,14 @@ def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np
             np.savez(person / name, **data)
 
 
-def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
-             conditions: tuple[str, ...] = CONDITIONS) -> list[dict]:
+def _fit_section(ground_mode: str) -> dict:
     raw = load_pipeline_yaml()["02_smpl_fit"]
+    return {**raw, "ground": {**raw["ground"], "mode": ground_mode}}
+
+
+def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
+             conditions: tuple[str, ...] = CONDITIONS, ground_mode: str = "auto") -> list[dict]:
+    raw = _fit_section(ground_mode)
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
@@ -90,15 +101,20 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
             _degrade(scene_dir, truth, model, condition, np.random.default_rng(SEED))
             scene = load_scene(scene_dir)
             _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
+            centres = {fid: camera.centre for fid, camera in cameras.items()}
             for mode in ("keypoints3d", "keypoints2d"):
                 fitter = Fitter(scene, model, cameras, FitConfig(**{**vars(config), "mode": mode}), "metres")
-                for pid, person in sorted(scene.humans.items()):
-                    started = time.perf_counter()
-                    fit = fitter.fit_person(person)
-                    seconds = time.perf_counter() - started
-                    errors = joint_errors(model, fit.params, dict(np.load(truth / f"{pid}_body.npz")))
-                    rows.append({"scenario": scenario, "person": pid, "mode": mode, "condition": condition,
-                                 "seconds": seconds, **errors})
+                started = time.perf_counter()
+                fits, floor = fitter.fit_people([person for _, person in sorted(scene.humans.items())])
+                seconds = time.perf_counter() - started
+                truths = {fit.pid: dict(np.load(truth / f"{fit.pid}_body.npz")) for fit in fits}
+                placement = placement_errors(model, {fit.pid: fit.params for fit in fits}, truths, centres)
+                frames = sum(int((~fit.params.interpolated).sum()) for fit in fits)
+                for fit in fits:
+                    errors = joint_errors(model, fit.params, truths[fit.pid])
+                    rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
+                                 "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
+                                 "floor": floor["applied"], **placement, **errors})
     return rows
 
 
@@ -121,8 +137,8 @@ def _silhouettes(model: BodyModel, bodies: list, camera, width: int, height: int
     return np.where(owner >= 0, np.asarray(owners + [-1])[owner], -1)
 
 
-def evaluate_unseen(size: str, root: Path) -> list[dict]:
-    raw = load_pipeline_yaml()["02_smpl_fit"]
+def evaluate_unseen(size: str, root: Path, ground_mode: str = "auto") -> list[dict]:
+    raw = _fit_section(ground_mode)
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
     for scenario in UNSEEN_SCENARIOS:
@@ -133,17 +149,20 @@ def evaluate_unseen(size: str, root: Path) -> list[dict]:
                 (person / name).unlink()
         scene = load_scene(scene_dir)
         _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
-        fitted, truths, seconds = {}, {}, {}
+        truths, seconds, pending, fitters = {}, {}, [], []
         for k, (pid, person) in enumerate(sorted(scene.humans.items())):
             own_motion = FIXTURES[scenario].people[k].motion
             motions = [m for m in raw["pose_prior_motions"] if m != own_motion]
             config = config_from_mapping(FitConfig, {**raw, "overlay": False, "pose_prior_motions": motions},
                                          "pipeline.yaml 02_smpl_fit")
-            started = time.perf_counter()
-            fit = Fitter(scene, model, cameras, config, "metres").fit_person(person)
-            seconds[pid] = time.perf_counter() - started
-            fitted[pid] = fit.params
+            fitters.append(Fitter(scene, model, cameras, config, "metres"))
+            pending.append(fitters[-1].start(person))
             truths[pid] = dict(np.load(truth_dir / f"{pid}_body.npz"))
+        place_on_common_floor(pending, model, cameras, fitters[0].config, scene.fps)
+        fitted = {}
+        for fitter, person_fit in zip(fitters, pending):
+            fit = fitter.finish(person_fit)
+            fitted[fit.pid], seconds[fit.pid] = fit.params, fit.report["seconds"]
         pids = sorted(fitted)
         overlap = {pid: [] for pid in pids}
         for fid in sorted(cameras):
@@ -188,6 +207,28 @@ def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDI
                   f"{np.mean([r['seconds'] for r in sel]):.1f} |")
 
 
+def print_placement_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS) -> None:
+    print(f"\n### {size} fixtures, 2D keypoints: placement per scene (no alignment; per-person similarity)\n")
+    print("| scene | condition | people | floor | as fitted, cm | person-aligned, cm | worst person, as fitted | "
+          "pelvis distances, cm | depth order | s per person per 100 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for scenario in dict.fromkeys(r["scenario"] for r in rows):
+        for condition in conditions:
+            sel = [r for r in rows if r["scenario"] == scenario and r["condition"] == condition
+                   and r["mode"] == "keypoints2d"]
+            if not sel:
+                continue
+            worst = max(sel, key=lambda r: r["mpjpe_m"])
+            distance = sel[0]["pelvis_distance_error_m"]
+            order = sel[0]["depth_order_agreement"]
+            print(f"| {scenario} | {condition} | {len(sel)} | {'yes' if sel[0]['floor'] else 'no'} | "
+                  f"{100 * np.mean([r['mpjpe_m'] for r in sel]):.1f} | "
+                  f"{100 * np.mean([r['sequence_aligned_m'] for r in sel]):.1f} | "
+                  f"{100 * worst['mpjpe_m']:.1f} ({worst['person']}) | "
+                  f"{'-' if np.isnan(distance) else f'{100 * distance:.1f}'} | "
+                  f"{'-' if np.isnan(order) else f'{100 * order:.0f}%'} | {sel[0]['seconds_per_100_frames']:.1f} |")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also the full-size scenes (minutes)")
@@ -196,16 +237,19 @@ def main() -> int:
     parser.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=CONDITIONS)
     parser.add_argument("--no-unseen", action="store_true", help="skip the scenes-not-seen table")
     parser.add_argument("--per-person", action="store_true", help="print every person's row too")
+    parser.add_argument("--ground", choices=("auto", "off"), default="auto",
+                        help="02_smpl_fit.ground.mode for every fit (off: each person alone, as before the floor)")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
     cache = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "bench_fit"
     cache.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         for size in ("full",) if args.only_full else ("small", "full") if args.full else ("small",):
-            rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions))
+            rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions), args.ground)
             print_table(size, rows, tuple(args.conditions))
+            print_placement_table(size, rows, tuple(args.conditions))
             if not args.no_unseen:
-                print_unseen_table(size, evaluate_unseen(size, Path(tmp)))
+                print_unseen_table(size, evaluate_unseen(size, Path(tmp), args.ground))
             if args.per_person:
                 for r in rows:
                     print(f"{r['scenario']} {r['person']} {r['mode']} {r['condition']}: "

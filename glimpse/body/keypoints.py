@@ -126,8 +126,16 @@ def keypoint_map(layout: str, data: BodyModelData) -> KeypointMap:
     """The keypoint map of ``layout`` (coco17 | coco17_skin | openpose25 | openpose18) for a body model file."""
     if layout not in LAYOUTS:
         raise ValueError(f"unknown keypoint layout {layout!r}; known: {', '.join(LAYOUTS)}")
+    return _entries_map(layout, LAYOUTS[layout], data)
+
+
+def landmark_map(name: str, landmark_names: tuple[str, ...], data: BodyModelData) -> KeypointMap:
+    """A map of surface landmarks only (for example the soles a fit stands on), called ``name``."""
+    return _entries_map(name, tuple((n, n) for n in landmark_names), data)
+
+
+def _entries_map(layout: str, entries: tuple[tuple[str, Source], ...], data: BodyModelData) -> KeypointMap:
     landmarks = body_landmarks(data)
-    entries = LAYOUTS[layout]
     missing = [s for _, s in entries if isinstance(s, str) and s not in landmarks]
     if missing:
         raise GlimpseError(f"{data.source}: the {layout} keypoints need the surface landmarks {', '.join(missing)}, "

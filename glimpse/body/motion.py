@@ -300,7 +300,13 @@ DANCE_BOUNCE_M = 0.04
 DANCE_ARM_ABDUCTION_DEG = 30.0
 DANCE_ARM_SWING_DEG = 30.0
 DANCE_ELBOW_DEG = 70.0
-BUILTIN_MOTIONS: tuple[str, ...] = ("walk", "turn", "wave", "side_step_dance")
+CROUCH_HIP_FLEX_DEG = 95.0        # deepest crouch (mid-clip); standing at the start and the end
+CROUCH_KNEE_DEG = 120.0
+CROUCH_TORSO_LEAN_DEG = 30.0      # forward, over the three spine joints
+CROUCH_ARMS_UP_DEG = 170.0        # shoulder abduction standing (arms raised overhead, out to the sides) ...
+CROUCH_ARMS_FORWARD_DEG = 80.0    # ... shoulder flexion in the crouch (arms at the sides swung forward, for balance)
+CROUCH_ELBOW_DEG = 10.0
+BUILTIN_MOTIONS: tuple[str, ...] = ("walk", "turn", "wave", "side_step_dance", "crouch")
 _MIRROR = np.array([1.0, -1.0, -1.0])  # a left-side rotation vector -> the right side's (x -> -x)
 
 
@@ -309,7 +315,9 @@ def builtin_motion(name: str, n_frames: int, fps: float = 30.0) -> BodySequence:
 
     walk: gait cycle ~1.1 s, root forward along +z at 1.2 m/s; turn: stepping in place while
     the root turns 360 degrees about +y (towards the left) over the clip; wave: right arm raised,
-    forearm waving side to side at 2 Hz; side_step_dance: stepping left and right along x.
+    forearm waving side to side at 2 Hz; side_step_dance: stepping left and right along x;
+    crouch: from standing with the arms overhead down into a deep crouch (arms forward) and back
+    up once over the clip, the feet kept in place.
     Cycle lengths are stretched to a whole number in ``n_frames / fps`` so frame ``n_frames``
     would equal frame 0 (the walk moved forward): the clip loops (for clips at least half a
     cycle long). Deterministic; betas are zero.
@@ -320,7 +328,8 @@ def builtin_motion(name: str, n_frames: int, fps: float = 30.0) -> BodySequence:
         raise GlimpseError(f"builtin motion {name}: need n_frames >= 1 and fps > 0; got {n_frames}, {fps}")
     time = np.arange(n_frames) / fps
     pose = np.zeros((n_frames, N_BODY_JOINTS, 3))
-    motion = {"walk": _walk, "turn": _turn, "wave": _wave, "side_step_dance": _side_step_dance}[name]
+    motion = {"walk": _walk, "turn": _turn, "wave": _wave, "side_step_dance": _side_step_dance,
+              "crouch": _crouch}[name]
     global_orient, transl = motion(pose, time, n_frames / fps)
     return BodySequence(np.zeros(N_BETAS), global_orient, pose.reshape(n_frames, BODY_POSE_DIM), transl,
                         float(fps), "y", f"builtin:{name}")
@@ -433,3 +442,24 @@ def _side_step_dance(pose, time, duration):
     frames = len(pose)
     transl = np.stack([DANCE_SWAY_M / 2 * np.sin(phase), -DANCE_BOUNCE_M * bounce, np.zeros(frames)], axis=1)
     return np.zeros((frames, 3)), transl
+
+
+def _crouch(pose, time, duration):
+    """Depth q = 0 (standing, arms overhead) -> 1 (crouching, arms forward) -> 0 over the clip. The shin
+    leans forward by knee - hip flexion and the ankle bends by as much (the foot stays flat); the root
+    drops and moves back so that the ankles stay where they were (thigh and shin LEG_LENGTH_M / 2 each)."""
+    depth = (1 - np.cos(2 * np.pi * time / duration)) / 2
+    hip, knee = CROUCH_HIP_FLEX_DEG * depth, KNEE_STANDING_DEG + (CROUCH_KNEE_DEG - KNEE_STANDING_DEG) * depth
+    shin_lean = knee - hip
+    for side in ("left", "right"):
+        _leg(pose, side, hip, knee, -shin_lean)
+        _arm(pose, side, CROUCH_ARMS_FORWARD_DEG * depth,
+             CROUCH_ARMS_UP_DEG + (ARM_AT_SIDE_ABDUCTION_DEG - CROUCH_ARMS_UP_DEG) * depth, CROUCH_ELBOW_DEG)
+    frames = len(pose)
+    for joint in ("spine1", "spine2", "spine3"):
+        pose[:, _JOINT[joint]] = _chain(frames, ("x", CROUCH_TORSO_LEAN_DEG / 3 * depth))
+    segment = LEG_LENGTH_M / 2
+    hip_r, shin_r, standing = np.radians(hip), np.radians(shin_lean), np.radians(KNEE_STANDING_DEG)
+    height = segment * (np.cos(hip_r) + np.cos(shin_r)) - segment * (1 + np.cos(standing))
+    back = -segment * (np.sin(hip_r) - np.sin(shin_r)) + segment * np.sin(standing)
+    return np.zeros((frames, 3)), np.stack([np.zeros(frames), height, back], axis=1)

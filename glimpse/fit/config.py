@@ -19,6 +19,18 @@ class FitWeights:
 
 
 @dataclass(frozen=True)
+class GroundConfig:
+    mode: Literal["auto", "off"]
+    contact_speed_m_s: float
+    contact_height_m: float
+    normal_prior_m: float
+    floor_sigma_m: float
+    skate_sigma_m_s: float
+    shape_ridge: float
+    iterations: int
+
+
+@dataclass(frozen=True)
 class FitConfig:
     mode: Literal["auto", "provided", "keypoints3d", "keypoints2d"]
     keypoint_min_confidence: float
@@ -32,4 +44,5 @@ class FitConfig:
     full_iterations: int
     pose_prior_anneal: list[float]
     robust_scale_anneal: list[float]
+    ground: GroundConfig
     overlay: bool

@@ -42,3 +42,35 @@ def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
             "sequence_aligned_m": float(np.linalg.norm(whole.apply(fit.reshape(-1, 3)) - true.reshape(-1, 3),
                                                        axis=1).mean()),
             "frame_aligned_m": float(np.mean(per_frame))}
+
+
+def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
+                     camera_centres: dict[int, np.ndarray]) -> dict[str, float]:
+    """How people are placed relative to each other, over every pair and the frames both were fitted in:
+    ``pelvis_distance_error_m``, the mean of | |p_i - p_j| - |q_i - q_j| | (fitted pelvises p, true q), and
+    ``depth_order_agreement``, the fraction of (pair, frame) whose nearer person (pelvis distance from
+    the camera centre [3] of that frame) is the true nearer one. nan without a pair."""
+    pelvis = {}
+    for pid, params in fitted.items():
+        keep = ~params.interpolated
+        ids = params.frame_ids[keep]
+        rows = np.searchsorted(truth[pid]["frame_ids"], ids)
+        t = truth[pid]
+        ours = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
+                           params.transl[keep], params.scale)[:, 0]
+        true = body_joints(model, t["betas"], t["global_orient"][rows], t["body_pose"][rows], t["transl"][rows])[:, 0]
+        pelvis[pid] = {int(f): (o, q) for f, o, q in zip(ids, ours, true)}
+    distance_errors, agreements = [], []
+    pids = sorted(pelvis)
+    for a, pid in enumerate(pids):
+        for other in pids[a + 1:]:
+            for frame in sorted(set(pelvis[pid]) & set(pelvis[other])):
+                (p, q), (p2, q2) = pelvis[pid][frame], pelvis[other][frame]
+                distance_errors.append(abs(np.linalg.norm(p - p2) - np.linalg.norm(q - q2)))
+                centre = camera_centres[frame]
+                nearer = np.linalg.norm(p - centre) < np.linalg.norm(p2 - centre)
+                agreements.append(nearer == (np.linalg.norm(q - centre) < np.linalg.norm(q2 - centre)))
+    if not distance_errors:
+        return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan")}
+    return {"pelvis_distance_error_m": float(np.mean(distance_errors)),
+            "depth_order_agreement": float(np.mean(agreements))}

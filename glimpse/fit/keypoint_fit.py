@@ -286,3 +286,31 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
     energy.track = track
     stage["yaw_hypotheses_chosen_deg"] = [YAW_HYPOTHESES_DEG[int(i)] for i in best]
     return state, stage
+
+
+def rescale_about(state: FitState, body: KeypointBody, centre: Tensor, factor: float, ridge: float) -> FitState:
+    """The state moved to ``factor`` times its distance from ``centre`` [3] (a static camera's centre) and
+    made ``factor`` times as large, so that it projects to the same pixels: new betas whose rest skeleton
+    (relative to the pelvis) best matches ``factor`` times the old one (least squares with ``ridge`` per
+    unit beta^2), the pelvis path scaled about the centre, orientations and pose kept."""
+    offsets = body.joint_shapedirs - body.joint_shapedirs[:1]  # [24, 3, S]: the pelvis-relative skeleton per beta
+    template = body.joint_template - body.joint_template[:1]
+    old = template + torch.einsum("jcs,s->jc", offsets, state.betas)
+    basis = offsets.reshape(-1, offsets.shape[-1])
+    target = (factor * old - template).reshape(-1)
+    betas = torch.linalg.solve(basis.T @ basis + ridge * torch.eye(basis.shape[1], dtype=basis.dtype), basis.T @ target)
+    scale = state.log_scale.exp()
+    pelvis_old = scale * (body.joint_template[0] + body.joint_shapedirs[0] @ state.betas) + state.transl  # [T, 3]
+    pelvis_new = centre + factor * (pelvis_old - centre)
+    transl = pelvis_new - scale * (body.joint_template[0] + body.joint_shapedirs[0] @ betas)
+    return FitState(betas, state.global_orient.clone(), state.body_pose.clone(), transl, state.log_scale.clone())
+
+
+def refit_on_floor(energy: FitEnergy, state: FitState, schedule: FitSchedule, iterations: int, who: str) -> dict:
+    """One more full stage at the final prior weights with ``energy.floor`` set; updates ``state``."""
+    energy.use_priors = True
+    energy.pose_prior_scale = schedule.pose_prior_anneal[-1]
+    energy.robust_scale_factor = schedule.robust_scale_anneal[-1]
+    energy.update_depth_reference(state)
+    return _minimise(energy, state, ["betas", "global_orient", "body_pose", "transl", *_scale(schedule)], iterations,
+                     who, "floor")

@@ -11,6 +11,9 @@
   fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
   metres of body (world units divided by the person's scale), so in SfM units they tell the scale:
   placed at the wrong depth in every frame of a moving camera, a person would race along an arc.
+- floor (only when stage 02 knows the people's common floor, glimpse.fit.ground): sole points of
+  the contact frames on the floor, ``(height / sigma_floor)^2``; any sole point below it, the
+  same; contact points that slide between consecutive contact frames, ``(speed / sigma_skate)^2``.
 Every term is a sum over frames (not a mean), so the priors weigh less where keypoints are many.
 """
 
@@ -116,6 +119,33 @@ def acceleration_energy(joints: Tensor, times_s: Tensor, frame_ids: Tensor, sigm
     return (keep[:, None] * accel.square().sum(-1)).sum() / sigma_m_s2**2
 
 
+@dataclass(frozen=True)
+class FloorContact:
+    """The floor term's data: sole landmarks (``soles``, a KeypointBody of glimpse.fit.ground.SOLE_LANDMARKS),
+    the plane ``normal . (x - camera_centre) = -camera_height`` (normal [3], camera_centre [3], world units),
+    contact [T, S] (1 where a sole point touches the floor), and the noise scales."""
+
+    soles: KeypointBody
+    normal: Tensor
+    camera_centre: Tensor
+    camera_height: float
+    contact: Tensor
+    sigma_m: float
+    skate_sigma_m_s: float
+
+    def energy(self, soles: Tensor, times_s: Tensor, frame_ids: Tensor, max_gap_frames: int) -> Tensor:
+        """soles [T, S, 3] world points (metres: the floor term is used in metric frames only)."""
+        height = (soles - self.camera_centre) @ self.normal + self.camera_height  # [T, S]
+        on_floor = (self.contact * height.square()).sum()
+        below = height.clamp(max=0.0).square().sum()
+        energy = (on_floor + below) / self.sigma_m**2
+        if len(times_s) >= 2:
+            both = self.contact[1:] * self.contact[:-1] * ((frame_ids[1:] - frame_ids[:-1]) <= max_gap_frames)[:, None]
+            velocity = (soles[1:] - soles[:-1]) / (times_s[1:] - times_s[:-1])[:, None, None]
+            energy = energy + (both * velocity.square().sum(-1)).sum() / self.skate_sigma_m_s**2
+        return energy
+
+
 class FitEnergy:
     """E(state) for a person's track; ``terms`` returns each term (for the report), ``__call__`` the sum."""
 
@@ -128,6 +158,7 @@ class FitEnergy:
         self.robust_scale_factor = 1.0  # ... and of the robust scale
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
+        self.floor: FloorContact | None = None  # the common floor, set for the ground refit
 
     def posed(self, state: FitState):
         return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
@@ -160,6 +191,11 @@ class FitEnergy:
             if self.use_speed:
                 terms["speed"] = speed_energy(metres[:, 0], self.track.times_s, self.track.frame_ids,
                                               w.speed_sigma_m_s, self.max_gap_frames)
+            if self.floor is not None:
+                soles = self.floor.soles(state.betas, state.global_orient, state.body_pose, state.transl,
+                                         state.log_scale.exp()).keypoints
+                terms["floor"] = self.floor.energy(soles, self.track.times_s, self.track.frame_ids,
+                                                   self.max_gap_frames)
         return terms
 
     def __call__(self, state: FitState) -> Tensor:

@@ -25,6 +25,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
+from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
 from glimpse.fit.objective import FitEnergy, FitState, Track
@@ -34,6 +35,7 @@ from glimpse.io.images import frame_name
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
 
 FIT_REPORT_FORMAT = "glimpse-fit-report/2"  # /2: residual keys carry their unit (_m, _px); fit stages added
+GROUND_FORMAT = "glimpse-ground/1"  # ground.json: the floor step's report (glimpse.fit.floor_fit)
 KEYPOINT_FILES = {"provided": "smpl.npz", "keypoints3d": "keypoints3d.npz", "keypoints2d": "keypoints2d.npz"}
 
 
@@ -101,7 +103,19 @@ class Fitter:
     # ------------------------------------------------------------------------------------------ per person
 
     def fit_person(self, person: HumanInputs) -> PersonFit:
-        """Body parameters of one person over the frames that have a camera, with a residual report."""
+        """Body parameters of one person alone (no common floor), with a residual report."""
+        return self.finish(self.start(person))
+
+    def fit_people(self, people: list[HumanInputs], progress=iter) -> tuple[list[PersonFit], dict]:
+        """Every person fitted, then those fitted from 2D keypoints placed on one floor (glimpse.fit.floor_fit)
+        when 02_smpl_fit.ground allows; ``progress`` wraps the per-person loop (tqdm). Returns the fits and
+        the floor's report."""
+        pending = [self.start(person) for person in progress(people)]
+        floor = place_on_common_floor(pending, self.model, self.cameras, self.config, self.scene.fps)
+        return [self.finish(p) for p in pending], floor
+
+    def start(self, person: HumanInputs) -> PendingFit:
+        """A person's own fit: given bodies read, keypoint fits run (global and full stages)."""
         mode = choose_mode(person, self.config)
         started = time.perf_counter()
         if mode == "provided":
@@ -109,12 +123,44 @@ class Fitter:
             if len(params.frame_ids) == 0:
                 raise GlimpseError(f"person {person.pid}: smpl.npz has no frame among the {len(self.cameras)} "
                                    f"frames with a camera")
-            fit_info: dict = {}
+            return PendingFit(person, mode, seconds=time.perf_counter() - started, params=params)
+        who, file = f"person {person.pid}", f"humans/{person.pid}/{KEYPOINT_FILES[mode]}"
+        track, layout = self._track(person, mode)
+        body = self.keypoint_body(layout)
+        energy = FitEnergy(body, track, self.prior, joint_limits(self.model.dtype), self.config.weights,
+                           self.config.max_interpolated_gap)
+        c = self.config
+        if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
+            raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
+                               f"{c.pose_prior_anneal} must have one value per full-stage step each")
+        schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
+                               tuple(c.robust_scale_anneal), self.fit_scale)
+        try:
+            if not track.is_2d:
+                initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
+            elif person.keypoints3d is not None:
+                initial = self._initial_from_3d(person, track, body)
+            else:
+                initial = initial_state_2d(body, track, self.prior.mean)
+            outcome = fit_track(energy, initial, schedule, who)
+        except GlimpseError as exc:
+            message = str(exc) if str(exc).startswith(who) else f"{who}: {exc}"
+            raise GlimpseError(f"{message} ({file})") from None
+        return PendingFit(person, mode, layout=layout, energy=energy, schedule=schedule, outcome=outcome,
+                          seconds=time.perf_counter() - started)
+
+    def finish(self, pending: PendingFit) -> PersonFit:
+        """The person's body parameters (gaps filled) and report, after any floor refit."""
+        person, mode = pending.person, pending.mode
+        if pending.params is not None:
+            params, fit_info = pending.params, {}
         else:
-            params, fit_info = self._fit_keypoints(person, mode)
+            params, fit_info = self._keypoint_result(pending)
         report = self.residual_report(person, params, mode)
         report.update(fit_info)
-        report["seconds"] = round(time.perf_counter() - started, 3)
+        if pending.ground:
+            report["ground"] = pending.ground
+        report["seconds"] = round(pending.seconds, 3)
         return PersonFit(person.pid, mode, params, report)
 
     def residual_report(self, person: HumanInputs, params: BodyParams, mode: str) -> dict:
@@ -140,32 +186,11 @@ class Fitter:
         report["per_frame"] = {frame_name(f): v for f, v in sorted(per_frame.items())}
         return report
 
-    def _fit_keypoints(self, person: HumanInputs, mode: str) -> tuple[BodyParams, dict]:
-        who, file = f"person {person.pid}", f"humans/{person.pid}/{KEYPOINT_FILES[mode]}"
-        track, layout = self._track(person, mode)
-        body = self.keypoint_body(layout)
-        energy = FitEnergy(body, track, self.prior, joint_limits(self.model.dtype), self.config.weights,
-                           self.config.max_interpolated_gap)
-        c = self.config
-        if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
-            raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
-                               f"{c.pose_prior_anneal} must have one value per full-stage step each")
-        schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
-                               tuple(c.robust_scale_anneal), self.fit_scale)
-        try:
-            if not track.is_2d:
-                initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
-            elif person.keypoints3d is not None:
-                initial = self._initial_from_3d(person, track, body)
-            else:
-                initial = initial_state_2d(body, track, self.prior.mean)
-            outcome = fit_track(energy, initial, schedule, who)
-        except GlimpseError as exc:
-            message = str(exc) if str(exc).startswith(who) else f"{who}: {exc}"
-            raise GlimpseError(f"{message} ({file})") from None
-        params = self._with_gaps_filled(outcome, track.frame_ids.numpy())
+    def _keypoint_result(self, pending: PendingFit) -> tuple[BodyParams, dict]:
+        outcome = pending.outcome
+        params = self._with_gaps_filled(outcome, pending.energy.track.frame_ids.numpy())
         scale = params.scale
-        info = {"layout": layout, "fitted_frames": len(track.frame_ids),
+        info = {"layout": pending.layout, "fitted_frames": len(outcome.state.transl),
                 "interpolated_frames": [frame_name(int(f)) for f in params.frame_ids[params.interpolated]],
                 "absent_frames": [frame_name(f) for f in sorted(self.cameras) if f not in set(params.frame_ids)],
                 "scale_fitted": self.fit_scale, "scale": scale, "metres_per_unit": 1.0 / scale,

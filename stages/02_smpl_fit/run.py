@@ -6,6 +6,7 @@ Params:  02_smpl_fit, body, compute (pipeline.yaml).
 Outputs (OUT/<scene>/02_smpl_fit/, CONTRACTS.md):
   humans/<pid>/body.npz         glimpse-body-params/1 (betas, global_orient, body_pose, transl, scale, interpolated)
   humans/<pid>/fit_report.json  glimpse-fit-report/2: mode, fit stages, per-frame keypoint residuals (m, px)
+  ground.json                   glimpse-ground/1: the people's common floor and each one's placement factor
   overlay.mp4                   the fitted bodies over the input frames (02_smpl_fit.overlay)
 Modes per person: provided > keypoints3d > keypoints2d unless 02_smpl_fit.mode forces one (glimpse/fit/).
 """
@@ -22,7 +23,7 @@ from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.params import BODY_PARAMS_FORMAT, write_body_params  # noqa: E402
 from glimpse.compute import apply_compute  # noqa: E402
-from glimpse.fit.stage import Fitter  # noqa: E402
+from glimpse.fit.stage import GROUND_FORMAT, Fitter  # noqa: E402
 from glimpse.fit.video import write_overlay_video  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
@@ -43,17 +44,19 @@ def run(ctx: StageContext) -> None:
 
     model = BodyModel.from_file(resolve_model_path(body), dtype=torch.float64)
     fitter = Fitter(scene, model, cameras, config, units)
-    fits = []
-    for pid, person in tqdm(sorted(scene.humans.items()), desc="02_smpl_fit people", unit="person"):
-        with ctx.timed(f"fit_{pid}"):
-            fit = fitter.fit_person(person)
-        folder = ctx.out / "humans" / pid
+    people = [person for _, person in sorted(scene.humans.items())]
+    with ctx.timed("fit"):
+        fits, floor = fitter.fit_people(people, progress=lambda items: tqdm(items, desc="02_smpl_fit people",
+                                                                            unit="person"))
+    for fit in fits:
+        folder = ctx.out / "humans" / fit.pid
         folder.mkdir(parents=True)
         write_body_params(folder / "body.npz", fit.params)
         (folder / "fit_report.json").write_text(json.dumps(fit.report, indent=1) + "\n")
-        ctx.formats[f"humans/{pid}/body.npz"] = BODY_PARAMS_FORMAT
-        ctx.formats[f"humans/{pid}/fit_report.json"] = fit.report["format"]
-        fits.append(fit)
+        ctx.formats[f"humans/{fit.pid}/body.npz"] = BODY_PARAMS_FORMAT
+        ctx.formats[f"humans/{fit.pid}/fit_report.json"] = fit.report["format"]
+    (ctx.out / "ground.json").write_text(json.dumps({"format": GROUND_FORMAT, **floor}, indent=1) + "\n")
+    ctx.formats["ground.json"] = GROUND_FORMAT
     if config.overlay:
         with ctx.timed("overlay"):
             keypoints = {pid: kp for pid, person in scene.humans.items()
@@ -62,6 +65,7 @@ def run(ctx: StageContext) -> None:
                                 keypoints)
         ctx.formats["overlay.mp4"] = "mp4/h264"
     ctx.summary["modes"] = {fit.pid: fit.mode for fit in fits}
+    ctx.summary["ground"] = {k: floor[k] for k in ("applied", "reason", "camera_height", "factors") if k in floor}
     ctx.summary["keypoint_residuals"] = {
         fit.pid: {k: v["mean"] for k, v in fit.report.items() if k.endswith(("_residual_m", "_residual_px")) and v}
         for fit in fits}

@@ -1,0 +1,146 @@
+"""Stage 02's floor step: every person's own fit done, the people fitted from 2D keypoints are put
+on one floor (glimpse.fit.ground) and refitted with their feet on it.
+
+1. Each person's sole points (heels, big toes) over its fitted frames; contacts are the sole
+   points that stay put across the view and are the body's lowest.
+2. The floor's normal from all contacts (each person's centred on its own), the people's mean
+   up where the contacts do not tell; each person's own contact plane along it.
+3. Each 2D-fitted person is moved along the camera's rays and scaled (betas) by the factor that
+   puts its contact plane on the common floor, then refitted with the floor term on
+   (glimpse.fit.objective.FloorContact: contacts on the floor, nothing below it, no sliding).
+
+Only for a static camera in a metric frame: moved along its own rays a person still projects
+to the same pixels there (a moving camera's people are placed by parallax instead).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from glimpse.body.keypoints import landmark_map
+from glimpse.body.model import BodyModel
+from glimpse.body.params import BodyParams
+from glimpse.cameras.model import PinholeCamera
+from glimpse.fit.config import FitConfig
+from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
+                                placement_factors, speed_across_view)
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
+from glimpse.fit.objective import FitEnergy, FloorContact
+from glimpse.scene import HumanInputs
+
+ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
+STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
+
+
+@dataclass
+class PendingFit:
+    """A person between its own fit and the common floor: given bodies (``params``), or a keypoint fit's
+    energy (track, priors), schedule and outcome, which the floor step may refit. ``ground`` collects
+    what the floor step did; ``seconds`` is the fitting time so far."""
+
+    person: HumanInputs
+    mode: str
+    seconds: float = 0.0
+    params: BodyParams | None = None
+    layout: str = ""
+    energy: FitEnergy | None = None
+    schedule: FitSchedule | None = None
+    outcome: FitOutcome | None = None
+    ground: dict = field(default_factory=dict)
+
+
+@dataclass
+class _Feet:
+    soles: np.ndarray  # [T, S, 3] world
+    up: np.ndarray  # [T, 3] the body's up in the world
+    contact: np.ndarray  # [T, S] bool
+
+
+def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: dict[int, PinholeCamera],
+                          config: FitConfig, fps: float) -> dict:
+    """Put the 2D-fitted people of ``pending`` on one floor and refit them (updating their outcomes);
+    ``fps`` is the scene's frame rate. Returns the floor report (``applied`` false with the reason when the step does not apply)."""
+    g = config.ground
+    movable = [p for p in pending if p.mode == "keypoints2d"]
+    centres = np.stack([cameras[f].centre for f in sorted(cameras)])
+    reason = ("02_smpl_fit.ground.mode is off" if g.mode == "off" else
+              "no person is fitted from 2D keypoints" if not movable else
+              "the camera moves (its people are placed by parallax)"
+              if not np.allclose(centres, centres[0], rtol=0.0,
+                                 atol=STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))) else
+              "the frame is not metric (the scale is fitted)" if any(p.schedule.fit_scale for p in movable) else None)
+    if reason is not None:
+        return {"applied": False, "reason": reason}
+    centre = centres[0]
+    soles_body = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
+    feet = [_feet(p, soles_body, centre, config, fps) for p in pending]
+    up_hint = sum(f.up.mean(0) for f in feet)
+    up_hint = up_hint / np.linalg.norm(up_hint)
+    grounded = [lowest_points(f.soles, up_hint) for f in feet]
+    normal = floor_normal(grounded, up_hint, g.normal_prior_m)
+    heights = person_camera_heights(grounded, normal, centre)
+    grounded = [points[np.abs((centre - points) @ normal - h) <= g.contact_height_m] if np.isfinite(h) else points
+                for points, h in zip(grounded, heights)]  # off their own plane: a foot lifted, a jump
+    normal = floor_normal(grounded, up_hint, g.normal_prior_m)
+    heights = person_camera_heights(grounded, normal, centre)
+    anchored = np.array([p.mode in ANCHOR_MODES for p in pending])
+    camera_height, factors = placement_factors(heights, anchored)
+    if not np.isfinite(camera_height):
+        return {"applied": False, "reason": "no person's feet were seen touching the ground"}
+    floor = Floor(normal, centre, camera_height)
+    for p, f, height, factor in zip(pending, feet, heights, factors):
+        p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),
+                    "camera_height_above_own_contacts": float(height) if np.isfinite(height) else None}
+        if p.mode == "keypoints2d" and f.contact.any():
+            started = time.perf_counter()
+            p.ground["refit"] = _refit(p, f, floor, float(factor), soles_body, g)
+            p.seconds += time.perf_counter() - started
+    return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
+            "camera_height": camera_height,
+            "camera_height_from": ("people placed metrically: " + ", ".join(p.person.pid for p, a in zip(pending, anchored)
+                                                                           if a)) if anchored.any()
+            else "the geometric mean over the people (their fitted heights on average)",
+            "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
+
+
+def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, config: FitConfig, fps: float) -> _Feet:
+    dtype = soles_body.joint_template.dtype
+    if pending.params is not None:
+        params = pending.params.select(pending.params.frame_ids[~pending.params.interpolated])
+        betas, orient, pose, transl = (torch.as_tensor(x, dtype=dtype) for x in
+                                       (params.betas, params.global_orient, params.body_pose, params.transl))
+        scale = float(params.scale)
+        frame_ids = params.frame_ids
+        times = frame_ids / fps
+    else:
+        state = pending.outcome.state
+        betas, orient, pose, transl, scale = (state.betas, state.global_orient, state.body_pose, state.transl,
+                                              float(state.log_scale.exp()))
+        frame_ids = pending.energy.track.frame_ids.numpy()
+        times = pending.energy.track.times_s.numpy()
+    with torch.no_grad():
+        soles = soles_body(betas, orient, pose, transl, torch.tensor(scale, dtype=dtype)).keypoints.numpy()
+    up = Rotation.from_rotvec(orient.numpy()).apply([0.0, 1.0, 0.0])
+    g = config.ground
+    speed = speed_across_view(soles, times, frame_ids, centre, config.max_interpolated_gap)
+    return _Feet(soles, up, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
+
+
+def _refit(pending: PendingFit, feet: _Feet, floor: Floor, factor: float, soles_body: KeypointBody, g) -> dict:
+    energy, outcome = pending.energy, pending.outcome
+    dtype = outcome.state.transl.dtype
+    centre = torch.as_tensor(floor.camera_centre, dtype=dtype)
+    state = rescale_about(outcome.state, energy.body, centre, factor, g.shape_ridge)
+    energy.floor = FloorContact(soles_body, torch.as_tensor(floor.normal, dtype=dtype), centre, floor.camera_height,
+                                torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m, g.skate_sigma_m_s)
+    stage = refit_on_floor(energy, state, pending.schedule, g.iterations, f"person {pending.person.pid}")
+    energy.floor = None
+    outcome.state = state.detached()
+    outcome.stages.append(stage)
+    return stage

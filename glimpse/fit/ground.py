@@ -1,0 +1,115 @@
+"""One floor for everyone: where a static camera's people stand tells each one's size.
+
+A single view cannot tell a person's size from its distance: a body scaled by s about the
+camera centre projects to exactly the same pixels. Fitted one at a time, a child is pulled
+towards the shape prior's adult height and placed too far, a tall adult too near. But people
+stand on one floor. Each fitted person's foot contacts (sole points that stay put in the image
+and are the body's lowest) lie on a plane parallel to the true floor at ``s_i`` times its
+distance from the camera; the pooled contacts give the floor's normal and, person by person,
+the factor that brings everyone onto one plane. People placed metrically (3D keypoints,
+given bodies) fix the camera's height above that floor; without them the factors' geometric
+mean is kept at 1 (the fitted heights on average).
+
+Pure functions on arrays (world units; the floor's normal points up, towards the camera).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SOLE_LANDMARKS = ("left_heel", "left_big_toe", "right_heel", "right_big_toe")  # the sole points a foot stands on
+
+
+@dataclass(frozen=True)
+class Floor:
+    """The plane ``normal . (x - camera_centre) = -camera_height``: normal [3] unit (up), camera_centre [3]
+    and camera_height (the camera centre's height above the floor) in world units."""
+
+    normal: np.ndarray
+    camera_centre: np.ndarray
+    camera_height: float
+
+    def height_of(self, points: np.ndarray) -> np.ndarray:
+        """[..., 3] world points -> [...] signed height above the floor (world units)."""
+        return (points - self.camera_centre) @ self.normal + self.camera_height
+
+
+def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray, camera_centre: np.ndarray,
+                      max_gap_frames: int) -> np.ndarray:
+    """[T, S] speed of points [T, S, 3] across the camera's view (the component along the viewing ray
+    dropped: a 2D fit's depth jitters, its image position does not), from the neighbouring frames at
+    most ``max_gap_frames`` away (one-sided at the ends, inf where a frame has no neighbour)."""
+    frames = len(points)
+    speed = np.full(points.shape[:2], np.inf)
+    for t in range(frames):
+        before = t - 1 if t > 0 and frame_ids[t] - frame_ids[t - 1] <= max_gap_frames else t
+        after = t + 1 if t + 1 < frames and frame_ids[t + 1] - frame_ids[t] <= max_gap_frames else t
+        if before == after:
+            continue
+        velocity = (points[after] - points[before]) / (times_s[after] - times_s[before])
+        ray = points[t] - camera_centre
+        ray = ray / np.linalg.norm(ray, axis=-1, keepdims=True).clip(min=1e-12)
+        across = velocity - (velocity * ray).sum(-1, keepdims=True) * ray
+        speed[t] = np.linalg.norm(across, axis=-1)
+    return speed
+
+
+def foot_contacts(soles: np.ndarray, up: np.ndarray, speed_m_s: np.ndarray, body_scale: float,
+                  max_speed_m_s: float, max_height_m: float) -> np.ndarray:
+    """[T, S] bool: sole points [T, S, 3] that touch the ground, judged on the body alone: slower than
+    ``max_speed_m_s`` (speed_m_s [T, S] in world units per second; metres = world units / body_scale)
+    and within ``max_height_m`` of the frame's lowest sole point along the body's up [T, 3]."""
+    height = (soles * up[:, None]).sum(-1) / body_scale
+    low = height - height.min(1, keepdims=True) <= max_height_m
+    return low & (speed_m_s / body_scale <= max_speed_m_s)
+
+
+def lowest_points(soles: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """[T, 3] each frame's lowest sole point along ``up`` [3] (soles [T, S, 3]): a standing, walking or
+    dancing person has a foot on the floor in nearly every frame, so these sample the floor far more
+    often than the contacts do."""
+    return soles[np.arange(len(soles)), (soles @ up).argmin(1)]
+
+
+def floor_normal(contacts: list[np.ndarray], up_hint: np.ndarray, prior_m: float) -> np.ndarray:
+    """The unit normal shared by the people's contact planes.
+
+    contacts: per person [N_i, 3] points on the ground (world). Each person's contacts lie on its own
+    plane (its placement is off by its own factor) with the common normal, so the normal is the
+    direction of least spread of the contacts, each person's centred on its own mean. Where the
+    contacts spread less than ``prior_m`` (one person walking a straight line leaves the tilt
+    about that line open) the people's mean up ``up_hint`` decides."""
+    up = up_hint / np.linalg.norm(up_hint)
+    scatter = prior_m**2 * (np.eye(3) - np.outer(up, up))
+    count = sum(len(c) for c in contacts)
+    for points in contacts:
+        if len(points):
+            centred = points - points.mean(0)
+            scatter += centred.T @ centred / max(count, 1)
+    _, vectors = np.linalg.eigh(scatter)
+    normal = vectors[:, 0]
+    return normal if normal @ up >= 0 else -normal
+
+
+def person_camera_heights(contacts: list[np.ndarray], normal: np.ndarray, camera_centre: np.ndarray) -> np.ndarray:
+    """[P] the camera centre's height above each person's ground plane (median over its points on the
+    ground; nan for a person without any)."""
+    return np.array([np.median((camera_centre - points) @ normal) if len(points) else np.nan for points in contacts])
+
+
+def placement_factors(heights: np.ndarray, anchored: np.ndarray) -> tuple[float, np.ndarray]:
+    """(camera height, [P] factors): person i moved to ``factor_i`` times its distance from the camera
+    (and scaled by it) stands on one floor with everyone. The camera height is the median of the
+    anchored people's (placed metrically), else the geometric mean of all; factor 1 for anchored
+    people and for people without contacts (nan heights)."""
+    known = np.isfinite(heights) & (heights > 0)
+    if not known.any():
+        return float("nan"), np.ones(len(heights))
+    if (known & anchored).any():
+        camera_height = float(np.median(heights[known & anchored]))
+    else:
+        camera_height = float(np.exp(np.log(heights[known]).mean()))
+    factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
+    return camera_height, factors

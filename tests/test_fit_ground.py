@@ -1,0 +1,176 @@
+"""One floor for everyone (glimpse.fit.ground, floor_fit): the floor and placement factors recovered
+from people placed wrong by known factors, contacts, the rescaling that keeps a body's pixels, the
+floor energy's gradient, and the whole step on a scene with an adult and a child."""
+
+import numpy as np
+import pytest
+import torch
+
+from glimpse.body.keypoints import keypoint_map
+from glimpse.body.model import BodyModel
+from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.fit.config import FitConfig
+from glimpse.fit.evaluate import body_joints
+from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
+                                placement_factors, speed_across_view)
+from glimpse.fit.keypoint_body import KeypointBody
+from glimpse.fit.keypoint_fit import rescale_about
+from glimpse.fit.objective import FitState, FloorContact, project
+from glimpse.fit.stage import Fitter
+from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose, make_scene
+from glimpse.io.cameras_json import read_cameras_json
+from glimpse.scene import load_scene
+
+F64 = torch.float64
+CAMERA = np.array([0.3, 1.6, -2.0])
+UP = np.array([0.05, 1.0, -0.08]) / np.linalg.norm([0.05, 1.0, -0.08])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return BodyModel.from_file(FREE_BODY, dtype=F64)
+
+
+def _floor_points(rng, count, centre_xz):
+    """Points on the plane through the origin with normal UP, around (x, z) = centre_xz."""
+    xz = rng.normal(0.0, 0.6, (count, 2)) + centre_xz
+    points = np.stack([xz[:, 0], np.zeros(count), xz[:, 1]], 1)
+    return points - np.outer(points @ UP, UP)  # onto the tilted plane
+
+
+def test_floor_and_factors_are_recovered_from_people_placed_wrong():
+    rng = np.random.default_rng(0)
+    true_height = float(CAMERA @ UP)
+    wrong = np.array([1.3, 0.8, 1.05])  # each person fitted at this many times its true distance
+    people = [_floor_points(rng, 40, c) for c in ((-1.0, 2.0), (1.0, 3.5), (0.0, 5.0))]
+    placed = [CAMERA + s * (p - CAMERA) for s, p in zip(wrong, people)]
+    normal = floor_normal(placed, UP + np.array([0.05, 0.0, 0.05]), prior_m=0.05)
+    assert np.degrees(np.arccos(min(1.0, normal @ UP))) < 0.1
+    heights = person_camera_heights(placed, normal, CAMERA)
+    np.testing.assert_allclose(heights, wrong * true_height, rtol=2e-3)  # the up hint's pull, 4 degrees off
+    # with nobody placed metrically, the factors bring everyone onto one floor (geometric mean kept)
+    camera_height, factors = placement_factors(heights, np.zeros(3, bool))
+    np.testing.assert_allclose(factors * wrong, (factors * wrong)[0], rtol=2e-3)
+    assert np.prod(factors) == pytest.approx(1.0)
+    # one person placed metrically fixes the camera's height: everyone then lands where they are
+    anchored = np.array([False, False, True])
+    heights[2] = true_height
+    camera_height, factors = placement_factors(heights, anchored)
+    assert camera_height == pytest.approx(true_height)
+    np.testing.assert_allclose(factors[:2], 1.0 / wrong[:2], rtol=2e-3)
+    assert factors[2] == 1.0
+    floor = Floor(normal, CAMERA, camera_height)
+    np.testing.assert_allclose(floor.height_of(np.concatenate(people)), 0.0, atol=0.01)
+
+
+def test_one_line_of_contacts_leaves_the_tilt_about_it_to_the_up_hint():
+    line = np.stack([np.linspace(-2, 2, 30), np.zeros(30), np.full(30, 3.0)], 1)  # walking along x on y = 0
+    hint = np.array([0.0, 1.0, 0.1]) / np.linalg.norm([0.0, 1.0, 0.1])
+    normal = floor_normal([line], hint, prior_m=0.05)
+    np.testing.assert_allclose(normal, hint, atol=1e-9)
+    assert person_camera_heights([np.zeros((0, 3))], normal, CAMERA)[0] != person_camera_heights(
+        [np.zeros((0, 3))], normal, CAMERA)[0]  # nan without points
+    assert placement_factors(np.array([np.nan]), np.zeros(1, bool))[1][0] == 1.0
+
+
+def test_contacts_are_the_lowest_sole_points_that_stay_put_across_the_view():
+    frames, times = 9, np.arange(9) / 10.0
+    soles = np.zeros((frames, 2, 3))
+    soles[:, 0] = [0.0, 0.0, 3.0]  # planted
+    soles[:, 1] = np.stack([np.linspace(0, 1.6, frames), np.full(frames, 0.1), np.full(frames, 3.0)], 1)  # swinging
+    up = np.tile([0.0, 1.0, 0.0], (frames, 1))
+    speed = speed_across_view(soles, times, np.arange(frames), np.zeros(3), max_gap_frames=2)
+    np.testing.assert_allclose(speed[:, 0], 0.0)
+    ray_x = soles[:, 1, 0] / np.linalg.norm(soles[:, 1], axis=1)  # 2 m/s along x, less its part along the ray
+    np.testing.assert_allclose(speed[:, 1], 2.0 * np.sqrt(1 - ray_x**2), rtol=1e-9)
+    contact = foot_contacts(soles, up, speed, 1.0, max_speed_m_s=0.3, max_height_m=0.04)
+    assert contact[:, 0].all() and not contact[:, 1].any()
+    np.testing.assert_allclose(lowest_points(soles, up[0]), soles[:, 0])
+    # moving along the viewing ray is not speed across the view (a 2D fit's depth jitters)
+    along_ray = np.linspace(1.0, 1.3, frames)[:, None, None] * np.array([[0.2, -1.0, 3.0]])
+    assert speed_across_view(along_ray, times, np.arange(frames), np.zeros(3), 2).max() < 1e-9
+    # a frame whose neighbours are too far away has no speed
+    assert np.isinf(speed_across_view(soles[:2], times[:2], np.array([0, 10]), np.zeros(3), 2)).all()
+
+
+def test_rescaling_about_the_camera_keeps_the_pixels_and_scales_the_body(model):
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    position, target = np.array([0.0, 1.5, -2.5]), np.array([0.0, 1.0, 2.0])
+    R, t = look_at_pose(position, target)
+    K = torch.as_tensor(intrinsics(320, 240, 60.0))[None].repeat(3, 1, 1)
+    Rt, tt = torch.as_tensor(R)[None].repeat(3, 1, 1), torch.as_tensor(t)[None].repeat(3, 1)
+    g = torch.Generator().manual_seed(1)
+    state = FitState(0.5 * torch.randn(10, generator=g, dtype=F64), 0.2 * torch.randn(3, 3, generator=g, dtype=F64),
+                     0.2 * torch.randn(3, 69, generator=g, dtype=F64),
+                     torch.tensor([[0.0, 1.0, 2.0], [0.3, 1.0, 2.2], [0.6, 1.0, 2.4]], dtype=F64),
+                     torch.zeros((), dtype=F64))
+    centre = torch.as_tensor(position)
+    for factor in (0.85, 1.15):
+        moved = rescale_about(state, body, centre, factor, ridge=1e-8)
+        before = body(state.betas, state.global_orient, state.body_pose, state.transl, torch.ones((), dtype=F64))
+        after = body(moved.betas, moved.global_orient, moved.body_pose, moved.transl, torch.ones((), dtype=F64))
+        pixels_before, depth_before = project(before.joints, K, Rt, tt)
+        pixels_after, depth_after = project(after.joints, K, Rt, tt)
+        assert (pixels_after - pixels_before).norm(dim=-1).max() < 1.0  # pixels at 320 wide
+        np.testing.assert_allclose((depth_after / depth_before).numpy(), factor, rtol=0.02)
+        span = lambda out: (out.joints[:, 15] - out.joints[:, 7]).norm(dim=-1)  # noqa: E731  head to ankle
+        np.testing.assert_allclose((span(after) / span(before)).numpy(), factor, rtol=0.02)
+
+
+def test_floor_energy_gradient_matches_finite_differences(model):
+    from glimpse.body.keypoints import landmark_map
+    from glimpse.fit.ground import SOLE_LANDMARKS
+
+    soles = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
+    g = torch.Generator().manual_seed(2)
+    contact = (torch.rand(4, 4, generator=g) > 0.4).to(F64)
+    term = FloorContact(soles, torch.as_tensor(UP), torch.as_tensor(CAMERA), 1.5, contact, 0.02, 0.1)
+    points = torch.randn(4, 4, 3, generator=g, dtype=F64) * 0.3 + torch.as_tensor(CAMERA - 1.52 * UP)
+    times, ids = torch.arange(4, dtype=F64) / 30.0, torch.arange(4)
+    points.requires_grad_(True)
+    term.energy(points, times, ids, 2).backward()
+    numeric = torch.zeros_like(points)
+    step = 1e-6
+    for index in np.ndindex(*points.shape):
+        shifted = points.detach().clone()
+        shifted[index] += step
+        high = term.energy(shifted, times, ids, 2)
+        shifted[index] -= 2 * step
+        numeric[index] = (high - term.energy(shifted, times, ids, 2)) / (2 * step)
+    torch.testing.assert_close(points.grad, numeric, rtol=1e-5, atol=1e-4)
+    on_floor = torch.as_tensor(CAMERA - 1.5 * UP).expand(4, 4, 3)
+    assert float(term.energy(on_floor, times, ids, 2)) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, tmp_path):
+    """Alone, the child is fitted at an adult's size and placed far too far; on one floor the two are
+    placed right relative to each other (their common size stays a prior: both end up equally off)."""
+    scene_dir = make_scene("adult_child", tmp_path / "adult_child", "small", seed=3)
+    truth = scene_dir.with_name(scene_dir.name + ".groundtruth")
+    for person in (scene_dir / "humans").iterdir():
+        for name in ("smpl.npz", "keypoints3d.npz"):
+            (person / name).unlink()
+    scene = load_scene(scene_dir)
+    _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    centre = cameras[0].centre
+    errors = {}
+    for mode in ("off", "auto"):
+        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {**raw["ground"], "mode": mode}},
+                                     "pipeline.yaml 02_smpl_fit")
+        fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(list(scene.humans.values()))
+        assert floor["applied"] == (mode == "auto")
+        ratios = []
+        for fit in fits:
+            params, true = fit.params, dict(np.load(truth / f"{fit.pid}_body.npz"))
+            rows = np.searchsorted(true["frame_ids"], params.frame_ids)
+            fitted = body_joints(model, params.betas, params.global_orient, params.body_pose, params.transl)[:, 0]
+            real = body_joints(model, true["betas"], true["global_orient"][rows], true["body_pose"][rows],
+                               true["transl"][rows])[:, 0]
+            ratios.append(np.median(np.linalg.norm(fitted - centre, axis=1) / np.linalg.norm(real - centre, axis=1)))
+        errors[mode] = abs(np.log(ratios[0] / ratios[1]))  # how wrong the two are placed relative to each other
+        if mode == "auto":
+            assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
+            assert all(fit.report["ground"]["contact_sole_points"] > 0 for fit in fits)
+    assert errors["auto"] < 0.5 * errors["off"]
+    assert errors["auto"] < 0.05
