@@ -43,7 +43,8 @@ from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
 from glimpse.fit.floor_fit import place_on_common_floor  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
 from glimpse.fixtures.mesh_render import Mesh, render_meshes  # noqa: E402
-from glimpse.fixtures.scenes import FREE_BODY, KEYPOINT_DROP_RATE, SCENARIOS as FIXTURES, make_scene  # noqa: E402
+from glimpse.fixtures.scenes import (  # noqa: E402
+    FREE_BODY, KEYPOINT_DROP_RATE, SCENARIOS as FIXTURES, keep_only_2d_keypoints, make_scene)
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -144,9 +145,7 @@ def evaluate_unseen(size: str, root: Path, ground_mode: str = "auto") -> list[di
     for scenario in UNSEEN_SCENARIOS:
         scene_dir = make_scene(scenario, root / f"unseen_{scenario}_{size}", size, seed=UNSEEN_SEED)
         truth_dir = scene_dir.with_name(scene_dir.name + ".groundtruth")
-        for person in (scene_dir / "humans").iterdir():
-            for name in ("smpl.npz", "keypoints3d.npz"):
-                (person / name).unlink()
+        keep_only_2d_keypoints(scene_dir)
         scene = load_scene(scene_dir)
         _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
         truths, seconds, pending, fitters = {}, {}, [], []

@@ -17,7 +17,7 @@ from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import rescale_about
 from glimpse.fit.objective import FitState, FloorContact, project
 from glimpse.fit.stage import Fitter
-from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose, make_scene
+from glimpse.fixtures.scenes import FREE_BODY, intrinsics, keep_only_2d_keypoints, look_at_pose, make_scene
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.scene import load_scene
 
@@ -147,9 +147,7 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
     placed right relative to each other (their common size stays a prior: both end up equally off)."""
     scene_dir = make_scene("adult_child", tmp_path / "adult_child", "small", seed=3)
     truth = scene_dir.with_name(scene_dir.name + ".groundtruth")
-    for person in (scene_dir / "humans").iterdir():
-        for name in ("smpl.npz", "keypoints3d.npz"):
-            (person / name).unlink()
+    keep_only_2d_keypoints(scene_dir)
     scene = load_scene(scene_dir)
     _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
     raw = load_pipeline_yaml()["02_smpl_fit"]

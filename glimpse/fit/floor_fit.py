@@ -26,9 +26,9 @@ from glimpse.body.keypoints import landmark_map
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
-from glimpse.fit.config import FitConfig
-from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
-                                placement_factors, speed_across_view)
+from glimpse.fit.config import FitConfig, GroundConfig
+from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, near_own_plane,
+                                person_camera_heights, placement_factors, speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import FitEnergy, FloorContact
@@ -65,16 +65,11 @@ class _Feet:
 def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: dict[int, PinholeCamera],
                           config: FitConfig, fps: float) -> dict:
     """Put the 2D-fitted people of ``pending`` on one floor and refit them (updating their outcomes);
-    ``fps`` is the scene's frame rate. Returns the floor report (``applied`` false with the reason when the step does not apply)."""
+    ``fps`` is the scene's frame rate. Returns the floor report (``applied`` false with the reason when
+    the step does not apply)."""
     g = config.ground
-    movable = [p for p in pending if p.mode == "keypoints2d"]
     centres = np.stack([cameras[f].centre for f in sorted(cameras)])
-    reason = ("02_smpl_fit.ground.mode is off" if g.mode == "off" else
-              "no person is fitted from 2D keypoints" if not movable else
-              "the camera moves (its people are placed by parallax)"
-              if not np.allclose(centres, centres[0], rtol=0.0,
-                                 atol=STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))) else
-              "the frame is not metric (the scale is fitted)" if any(p.schedule.fit_scale for p in movable) else None)
+    reason = _why_not(pending, centres, g)
     if reason is not None:
         return {"applied": False, "reason": reason}
     centre = centres[0]
@@ -84,29 +79,42 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     up_hint = up_hint / np.linalg.norm(up_hint)
     grounded = [lowest_points(f.soles, up_hint) for f in feet]
     normal = floor_normal(grounded, up_hint, g.normal_prior_m)
-    heights = person_camera_heights(grounded, normal, centre)
-    grounded = [points[np.abs((centre - points) @ normal - h) <= g.contact_height_m] if np.isfinite(h) else points
-                for points, h in zip(grounded, heights)]  # off their own plane: a foot lifted, a jump
+    grounded = near_own_plane(grounded, normal, centre, g.contact_height_m)
     normal = floor_normal(grounded, up_hint, g.normal_prior_m)
     heights = person_camera_heights(grounded, normal, centre)
     anchored = np.array([p.mode in ANCHOR_MODES for p in pending])
     camera_height, factors = placement_factors(heights, anchored)
     if not np.isfinite(camera_height):
-        return {"applied": False, "reason": "no person's feet were seen touching the ground"}
+        return {"applied": False, "reason": "no person's feet were seen on the ground"}
     floor = Floor(normal, centre, camera_height)
     for p, f, height, factor in zip(pending, feet, heights, factors):
         p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),
-                    "camera_height_above_own_contacts": float(height) if np.isfinite(height) else None}
+                    "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
         if p.mode == "keypoints2d" and f.contact.any():
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, floor, float(factor), soles_body, g)
             p.seconds += time.perf_counter() - started
+    anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
             "camera_height": camera_height,
-            "camera_height_from": ("people placed metrically: " + ", ".join(p.person.pid for p, a in zip(pending, anchored)
-                                                                           if a)) if anchored.any()
+            "camera_height_from": ("people placed metrically: " + ", ".join(anchors)) if anchors
             else "the geometric mean over the people (their fitted heights on average)",
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
+
+
+def _why_not(pending: list[PendingFit], centres: np.ndarray, g: GroundConfig) -> str | None:
+    """Why the floor step does not apply (None when it does)."""
+    movable = [p for p in pending if p.mode == "keypoints2d"]
+    tolerance = STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))
+    if g.mode == "off":
+        return "02_smpl_fit.ground.mode is off"
+    if not movable:
+        return "no person is fitted from 2D keypoints"
+    if not np.allclose(centres, centres[0], rtol=0.0, atol=tolerance):
+        return "the camera moves (its people are placed by parallax)"
+    if any(p.schedule.fit_scale for p in movable):
+        return "the frame is not metric (the scale is fitted)"
+    return None
 
 
 def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, config: FitConfig, fps: float) -> _Feet:
@@ -132,7 +140,8 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, con
     return _Feet(soles, up, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
 
-def _refit(pending: PendingFit, feet: _Feet, floor: Floor, factor: float, soles_body: KeypointBody, g) -> dict:
+def _refit(pending: PendingFit, feet: _Feet, floor: Floor, factor: float, soles_body: KeypointBody,
+           g: GroundConfig) -> dict:
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     centre = torch.as_tensor(floor.camera_centre, dtype=dtype)

@@ -99,6 +99,15 @@ def person_camera_heights(contacts: list[np.ndarray], normal: np.ndarray, camera
     return np.array([np.median((camera_centre - points) @ normal) if len(points) else np.nan for points in contacts])
 
 
+def near_own_plane(points: list[np.ndarray], normal: np.ndarray, camera_centre: np.ndarray,
+                   tolerance: float) -> list[np.ndarray]:
+    """Each person's points [N_i, 3] less those more than ``tolerance`` (world units) off the person's
+    own plane along ``normal`` (median height): a lifted foot, a jump, a bad frame."""
+    heights = person_camera_heights(points, normal, camera_centre)
+    return [p[np.abs((camera_centre - p) @ normal - h) <= tolerance] if np.isfinite(h) else p
+            for p, h in zip(points, heights)]
+
+
 def placement_factors(heights: np.ndarray, anchored: np.ndarray) -> tuple[float, np.ndarray]:
     """(camera height, [P] factors): person i moved to ``factor_i`` times its distance from the camera
     (and scaled by it) stands on one floor with everyone. The camera height is the median of the

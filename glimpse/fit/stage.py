@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,7 +107,8 @@ class Fitter:
         """Body parameters of one person alone (no common floor), with a residual report."""
         return self.finish(self.start(person))
 
-    def fit_people(self, people: list[HumanInputs], progress=iter) -> tuple[list[PersonFit], dict]:
+    def fit_people(self, people: list[HumanInputs],
+                   progress: Callable[[list], Iterable] = iter) -> tuple[list[PersonFit], dict]:
         """Every person fitted, then those fitted from 2D keypoints placed on one floor (glimpse.fit.floor_fit)
         when 02_smpl_fit.ground allows; ``progress`` wraps the per-person loop (tqdm). Returns the fits and
         the floor's report."""
