@@ -65,11 +65,13 @@ def test_mirroring_a_pose_swaps_sides_and_is_its_own_inverse():
     assert np.allclose(mirror_body_pose(mirror_body_pose(walk)), walk)
 
 
-def test_pose_prior_is_the_gaussian_of_the_motions(prior, config):
-    poses = motion_poses(config.pose_prior_motions)
+def test_single_gaussian_pose_prior_is_the_gaussian_of_the_motions(config):
+    motions = ["walk", "turn", "wave", "side_step_dance"]  # none bends the spine forward
+    prior = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=False)
+    poses = motion_poses(motions)
     samples = np.concatenate([poses, mirror_body_pose(poses)])
     covariance = np.cov(samples.T) + math.radians(config.pose_prior_floor_deg) ** 2 * np.eye(69)
-    W = prior.whitening.numpy()
+    W = prior.whitenings[0].numpy()
     assert np.allclose(W.T @ W @ covariance, np.eye(69), atol=1e-8)
     assert np.allclose(prior.mean.numpy(), samples.mean(0))
     assert float(prior.energy(prior.mean[None])) == pytest.approx(0.0, abs=1e-12)
@@ -78,6 +80,40 @@ def test_pose_prior_is_the_gaussian_of_the_motions(prior, config):
     odd[3 * SMPL_BODY_JOINTS.index("spine1")] = 1.2
     assert float(prior.energy(odd[None])) > 0.95 * (1.2 / math.radians(config.pose_prior_floor_deg)) ** 2
     assert float(prior.energy(odd[None])) > float(prior.energy(torch.as_tensor(samples)).max())
+
+
+def test_mixture_pose_prior_has_one_gaussian_per_motion_and_keeps_a_crouch(config):
+    motions = ["walk", "side_step_dance", "crouch"]
+    prior = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=True)
+    assert prior.means.shape == (3, 69) and "mixture of 3" in prior.description
+    for k, motion in enumerate(motions):
+        poses = motion_poses([motion])
+        samples = np.concatenate([poses, mirror_body_pose(poses)])
+        covariance = np.cov(samples.T) + math.radians(config.pose_prior_floor_deg) ** 2 * np.eye(69)
+        W = prior.whitenings[k].numpy()
+        assert np.allclose(W.T @ W @ covariance, np.eye(69), atol=1e-8), motion
+        assert np.allclose(prior.means[k].numpy(), samples.mean(0)), motion
+    # -2 log of the equal-weight mixture density, up to a constant: checked against scipy
+    from scipy.stats import multivariate_normal
+
+    pose = torch.as_tensor(builtin_motion("crouch", 30).body_pose[13:17])  # the deepest crouch
+    densities = []
+    for k in range(3):
+        covariance = np.linalg.inv(prior.whitenings[k].numpy().T @ prior.whitenings[k].numpy())
+        densities.append(multivariate_normal(prior.means[k].numpy(), covariance).logpdf(pose.numpy()))
+    reference = -2 * np.logaddexp.reduce(np.stack(densities), axis=0)
+    difference = prior.energy(pose).numpy() - reference
+    assert np.allclose(difference, difference[0], atol=1e-6)  # the same constant for every pose
+    # a deep crouch costs, and is pulled, far less than under one Gaussian over the same motions (a blob
+    # centred on neither crouching nor walking)
+    single = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=False)
+    pulls = []
+    for candidate in (prior, single):
+        held = pose.clone().requires_grad_(True)
+        energy = candidate.energy(held)
+        pulls.append((energy.detach(), torch.autograd.grad(energy.sum(), held)[0].norm(dim=1)))
+    assert (pulls[0][0] < 0.6 * pulls[1][0]).all() and (pulls[0][1] < 0.7 * pulls[1][1]).all()
+    assert torch.autograd.gradcheck(prior.energy, (pose.clone().requires_grad_(True),))
 
 
 def test_joint_limits_accept_every_built_in_motion_and_refuse_bending_the_wrong_way():

@@ -12,7 +12,7 @@ from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints
 from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
-                                placement_factors, speed_across_view)
+                                placement_factors, plane_weights, speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import rescale_about
 from glimpse.fit.objective import FitState, FloorContact, project
@@ -52,6 +52,13 @@ def test_floor_and_factors_are_recovered_from_people_placed_wrong():
     camera_height, factors = placement_factors(heights, np.zeros(3, bool))
     np.testing.assert_allclose(factors * wrong, (factors * wrong)[0], rtol=2e-3)
     assert np.prod(factors) == pytest.approx(1.0)
+    # a person whose ground points scatter (legs fitted wrong) weighs less in the common size
+    scattered = [points + np.outer(np.random.default_rng(1).normal(0, 0.2, len(points)), UP) if k == 0 else points
+                 for k, points in enumerate(placed)]
+    trust = plane_weights(scattered, normal, CAMERA, noise=0.02)
+    assert trust[0] < 0.05 * trust[1:].min()
+    camera_height, _ = placement_factors(heights, np.zeros(3, bool), trust)
+    assert camera_height == pytest.approx(true_height * np.sqrt(wrong[1] * wrong[2]), rel=0.01)  # the two others
     # one person placed metrically fixes the camera's height: everyone then lands where they are
     anchored = np.array([False, False, True])
     heights[2] = true_height

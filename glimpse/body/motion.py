@@ -306,7 +306,16 @@ CROUCH_TORSO_LEAN_DEG = 30.0      # forward, over the three spine joints
 CROUCH_ARMS_UP_DEG = 170.0        # shoulder abduction standing (arms raised overhead, out to the sides) ...
 CROUCH_ARMS_FORWARD_DEG = 80.0    # ... shoulder flexion in the crouch (arms at the sides swung forward, for balance)
 CROUCH_ELBOW_DEG = 10.0
-BUILTIN_MOTIONS: tuple[str, ...] = ("walk", "turn", "wave", "side_step_dance", "crouch")
+SIT_HIP_FLEX_DEG = 90.0           # seated (thighs level, shins upright) through the middle of the clip
+SIT_KNEE_DEG = 90.0
+SIT_TORSO_LEAN_DEG = 10.0
+SIT_ARM_FLEX_DEG = 35.0           # hands resting on the thighs
+SIT_ELBOW_DEG = 50.0
+SIT_HOLD = 1.6                    # the sitting depth profile is clipped at 1 / this of its peak: a plateau
+REACH_CYCLE_S = 1.5               # one reach with each arm
+REACH_ABDUCTION_DEG = 165.0       # the reaching arm, overhead
+REACH_SIDE_BEND_DEG = 10.0        # the trunk leans towards the reaching arm
+BUILTIN_MOTIONS: tuple[str, ...] = ("walk", "turn", "wave", "side_step_dance", "crouch", "sit", "reach")
 _MIRROR = np.array([1.0, -1.0, -1.0])  # a left-side rotation vector -> the right side's (x -> -x)
 
 
@@ -317,7 +326,9 @@ def builtin_motion(name: str, n_frames: int, fps: float = 30.0) -> BodySequence:
     the root turns 360 degrees about +y (towards the left) over the clip; wave: right arm raised,
     forearm waving side to side at 2 Hz; side_step_dance: stepping left and right along x;
     crouch: from standing with the arms overhead down into a deep crouch (arms forward) and back
-    up once over the clip, the feet kept in place.
+    up once over the clip, the feet kept in place; sit: sitting down (on a seat the motion does not
+    show), seated through the middle of the clip, standing up; reach: standing, each arm in turn
+    reaching up overhead.
     Cycle lengths are stretched to a whole number in ``n_frames / fps`` so frame ``n_frames``
     would equal frame 0 (the walk moved forward): the clip loops (for clips at least half a
     cycle long). Deterministic; betas are zero.
@@ -329,7 +340,7 @@ def builtin_motion(name: str, n_frames: int, fps: float = 30.0) -> BodySequence:
     time = np.arange(n_frames) / fps
     pose = np.zeros((n_frames, N_BODY_JOINTS, 3))
     motion = {"walk": _walk, "turn": _turn, "wave": _wave, "side_step_dance": _side_step_dance,
-              "crouch": _crouch}[name]
+              "crouch": _crouch, "sit": _sit, "reach": _reach}[name]
     global_orient, transl = motion(pose, time, n_frames / fps)
     return BodySequence(np.zeros(N_BETAS), global_orient, pose.reshape(n_frames, BODY_POSE_DIM), transl,
                         float(fps), "y", f"builtin:{name}")
@@ -445,21 +456,51 @@ def _side_step_dance(pose, time, duration):
 
 
 def _crouch(pose, time, duration):
-    """Depth q = 0 (standing, arms overhead) -> 1 (crouching, arms forward) -> 0 over the clip. The shin
-    leans forward by knee - hip flexion and the ankle bends by as much (the foot stays flat); the root
-    drops and moves back so that the ankles stay where they were (thigh and shin LEG_LENGTH_M / 2 each)."""
+    """Depth q = 0 (standing, arms overhead) -> 1 (crouching, arms forward) -> 0 over the clip."""
     depth = (1 - np.cos(2 * np.pi * time / duration)) / 2
-    hip, knee = CROUCH_HIP_FLEX_DEG * depth, KNEE_STANDING_DEG + (CROUCH_KNEE_DEG - KNEE_STANDING_DEG) * depth
+    for side in ("left", "right"):
+        _arm(pose, side, CROUCH_ARMS_FORWARD_DEG * depth,
+             CROUCH_ARMS_UP_DEG + (ARM_AT_SIDE_ABDUCTION_DEG - CROUCH_ARMS_UP_DEG) * depth, CROUCH_ELBOW_DEG)
+    return _lower_body(pose, depth, CROUCH_HIP_FLEX_DEG, CROUCH_KNEE_DEG, CROUCH_TORSO_LEAN_DEG)
+
+
+def _sit(pose, time, duration):
+    """Standing -> seated (a plateau through the middle of the clip) -> standing; hands on the thighs."""
+    depth = np.minimum(1.0, SIT_HOLD * (1 - np.cos(2 * np.pi * time / duration)) / 2)
+    for side in ("left", "right"):
+        _arm(pose, side, SIT_ARM_FLEX_DEG * depth, ARM_AT_SIDE_ABDUCTION_DEG, SIT_ELBOW_DEG * depth)
+    return _lower_body(pose, depth, SIT_HIP_FLEX_DEG, SIT_KNEE_DEG, SIT_TORSO_LEAN_DEG)
+
+
+def _lower_body(pose, depth, hip_deg, knee_deg, lean_deg):
+    """Hips and knees bent by ``depth`` (0..1) of hip_deg and knee_deg, the trunk leaning forward by
+    lean_deg (over the three spine joints). The shin leans forward by knee - hip flexion and the ankle
+    bends by as much (the foot stays flat); the root drops and moves back so that the ankles stay put
+    (thigh and shin LEG_LENGTH_M / 2 each). Returns (global_orient, transl)."""
+    hip, knee = hip_deg * depth, KNEE_STANDING_DEG + (knee_deg - KNEE_STANDING_DEG) * depth
     shin_lean = knee - hip
     for side in ("left", "right"):
         _leg(pose, side, hip, knee, -shin_lean)
-        _arm(pose, side, CROUCH_ARMS_FORWARD_DEG * depth,
-             CROUCH_ARMS_UP_DEG + (ARM_AT_SIDE_ABDUCTION_DEG - CROUCH_ARMS_UP_DEG) * depth, CROUCH_ELBOW_DEG)
     frames = len(pose)
     for joint in ("spine1", "spine2", "spine3"):
-        pose[:, _JOINT[joint]] = _chain(frames, ("x", CROUCH_TORSO_LEAN_DEG / 3 * depth))
+        pose[:, _JOINT[joint]] = _chain(frames, ("x", lean_deg / 3 * depth))
     segment = LEG_LENGTH_M / 2
     hip_r, shin_r, standing = np.radians(hip), np.radians(shin_lean), np.radians(KNEE_STANDING_DEG)
     height = segment * (np.cos(hip_r) + np.cos(shin_r)) - segment * (1 + np.cos(standing))
     back = -segment * (np.sin(hip_r) - np.sin(shin_r)) + segment * np.sin(standing)
     return np.zeros((frames, 3)), np.stack([np.zeros(frames), height, back], axis=1)
+
+
+def _reach(pose, time, duration):
+    """Standing; the left arm reaches up overhead while the right is down, then the other way round;
+    the trunk leans towards the reaching arm."""
+    phase = _phase(time, duration, REACH_CYCLE_S)
+    frames = len(pose)
+    for side, lift in (("left", np.maximum(0.0, np.sin(phase)) ** 2), ("right", np.maximum(0.0, -np.sin(phase)) ** 2)):
+        _leg(pose, side, 0.0, KNEE_STANDING_DEG)
+        _arm(pose, side, 0.0, ARM_AT_SIDE_ABDUCTION_DEG + (REACH_ABDUCTION_DEG - ARM_AT_SIDE_ABDUCTION_DEG) * lift,
+             CROUCH_ELBOW_DEG)
+    bend = REACH_SIDE_BEND_DEG * np.sin(phase)  # -z about the spine leans the trunk to its left (+x)
+    for joint in ("spine1", "spine2", "spine3"):
+        pose[:, _JOINT[joint]] = _chain(frames, ("z", -bend / 3))
+    return np.zeros((frames, 3)), np.zeros((frames, 3))

@@ -40,6 +40,7 @@ class FitConfig:
     weights: FitWeights
     pose_prior_motions: list[str]
     pose_prior_floor_deg: float
+    pose_prior_mixture: bool
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]

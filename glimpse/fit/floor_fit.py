@@ -28,7 +28,7 @@ from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.config import FitConfig, GroundConfig
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, near_own_plane,
-                                person_camera_heights, placement_factors, speed_across_view)
+                                person_camera_heights, placement_factors, plane_weights, speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import FitEnergy, FloorContact
@@ -83,7 +83,12 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     normal = floor_normal(grounded, up_hint, g.normal_prior_m)
     heights = person_camera_heights(grounded, normal, centre)
     anchored = np.array([p.mode in ANCHOR_MODES for p in pending])
-    camera_height, factors = placement_factors(heights, anchored)
+    if (heights <= 0).any():  # nan (no points) compares False
+        below = [p.person.pid for p, h in zip(pending, heights) if h <= 0]
+        return {"applied": False, "reason": f"the people's feet do not agree on a floor: the camera would stand "
+                                            f"below the feet of {', '.join(below)} (a fit with its legs wrong?)"}
+    trust = plane_weights(grounded, normal, centre, g.floor_sigma_m)
+    camera_height, factors = placement_factors(heights, anchored, trust)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
     floor = Floor(normal, centre, camera_height)
@@ -98,7 +103,8 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
             "camera_height": camera_height,
             "camera_height_from": ("people placed metrically: " + ", ".join(anchors)) if anchors
-            else "the geometric mean over the people (their fitted heights on average)",
+            else "the geometric mean over the people (their fitted heights on average), each weighted by how "
+                 "flat its own ground points lie",
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
 
 

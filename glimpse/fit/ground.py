@@ -108,17 +108,38 @@ def near_own_plane(points: list[np.ndarray], normal: np.ndarray, camera_centre: 
             for p, h in zip(points, heights)]
 
 
-def placement_factors(heights: np.ndarray, anchored: np.ndarray) -> tuple[float, np.ndarray]:
+def plane_weights(points: list[np.ndarray], normal: np.ndarray, camera_centre: np.ndarray,
+                  noise: float) -> np.ndarray:
+    """[P] how much each person's ground plane is trusted: its number of points over the squared spread
+    of their heights about their median (robust: 1.4826 times the median absolute deviation) plus
+    ``noise``^2 (world units). A person whose legs were fitted wrong has feet all over the place."""
+    weights = []
+    for p in points:
+        if not len(p):
+            weights.append(0.0)
+            continue
+        heights = (camera_centre - p) @ normal
+        spread = 1.4826 * np.median(np.abs(heights - np.median(heights)))
+        weights.append(len(p) / (spread**2 + noise**2))
+    return np.array(weights)
+
+
+def placement_factors(heights: np.ndarray, anchored: np.ndarray,
+                      weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """(camera height, [P] factors): person i moved to ``factor_i`` times its distance from the camera
     (and scaled by it) stands on one floor with everyone. The camera height is the median of the
-    anchored people's (placed metrically), else the geometric mean of all; factor 1 for anchored
-    people and for people without contacts (nan heights)."""
+    anchored people's (placed metrically), else the geometric mean of all, weighted by ``weights`` [P]
+    (equal when None); factor 1 for anchored people and for people without ground points (nan heights)."""
     known = np.isfinite(heights) & (heights > 0)
     if not known.any():
         return float("nan"), np.ones(len(heights))
     if (known & anchored).any():
         camera_height = float(np.median(heights[known & anchored]))
     else:
-        camera_height = float(np.exp(np.log(heights[known]).mean()))
+        w = np.ones(len(heights)) if weights is None else np.asarray(weights, float)
+        w = np.where(known, w, 0.0)
+        if w.sum() <= 0:
+            w = known.astype(float)
+        camera_height = float(np.exp((w * np.log(np.where(known, heights, 1.0))).sum() / w.sum()))
     factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
     return camera_height, factors

@@ -1,10 +1,12 @@
 """Offline priors for body fitting: no downloaded GMM or VPoser weights.
 
-- **Pose prior**: one Gaussian over the 69 body-pose numbers, fitted to the poses of the given
-  motions (the built-in procedural ones by default, plus any AMASS- or smplx-style .npz the user
-  lists) and their left-right mirror images, with an isotropic floor variance added so that poses
-  the motions never show stay reachable. Its energy is the squared Mahalanobis distance.
-  It knows only what those motions do: standing, walking, turning, waving, side steps.
+- **Pose prior**: a mixture of Gaussians over the 69 body-pose numbers, one per motion (the
+  built-in procedural ones by default, plus any AMASS- or smplx-style .npz the user lists), each
+  fitted to that motion's poses and their left-right mirror images, with an isotropic floor
+  variance added so that poses the motions never show stay reachable. Its energy is the
+  mixture's negative log-likelihood (times 2): near one component, that component's squared
+  Mahalanobis distance. A single Gaussian over everything would put a crouch and a walk in one
+  blob whose centre is neither, and pull both towards it. It knows only what the motions do.
 - **Joint limits**: the hinge joints (knees, elbows) bend one way only; a squared penalty on the
   axis-angle components outside anatomical ranges (as SMPLify's angle prior, with bounds).
 - **Shape prior**: betas are unit-variance coefficients; energy ``|betas|^2``.
@@ -65,31 +67,52 @@ def motion_poses(sources: list[str]) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PosePrior:
-    """Gaussian pose prior. mean [69] radians; whitening [69, 69] with ``whitening.T @ whitening =
-    inverse covariance``; description says what it was fitted to."""
+    """A mixture of Gaussians over body_pose, equal weights. means [C, 69] radians; whitenings
+    [C, 69, 69] with ``whitening.T @ whitening = inverse covariance``; log_det_excess [C]: each
+    component's log-determinant of covariance above the smallest one's. ``mean`` [69] is the mean of
+    all the poses (where fits start). description says what it was fitted to."""
 
+    means: Tensor
+    whitenings: Tensor
+    log_det_excess: Tensor
     mean: Tensor
-    whitening: Tensor
     description: str
 
     def energy(self, body_pose: Tensor) -> Tensor:
-        """[T, 69] -> [T] squared Mahalanobis distance to the mean."""
-        return ((body_pose - self.mean) @ self.whitening.T).square().sum(-1)
+        """[T, 69] -> [T] the mixture's negative log-likelihood times 2, up to a constant:
+        ``-2 log sum_c exp(-(d_c^2 + log_det_excess_c) / 2)``, d_c the Mahalanobis distance to component c
+        (the squared Mahalanobis distance itself for one component)."""
+        offsets = body_pose[:, None] - self.means  # [T, C, 69]
+        squared = torch.einsum("cij,tcj->tci", self.whitenings, offsets).square().sum(-1)  # [T, C]
+        return -2.0 * torch.logsumexp(-0.5 * (squared + self.log_det_excess), dim=-1)
 
 
-def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = torch.float64) -> PosePrior:
-    """Fit the Gaussian to the motions' poses and their mirror images; ``floor_deg`` is the
-    standard deviation of the isotropic variance added to every component."""
+def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = torch.float64,
+                     mixture: bool = True) -> PosePrior:
+    """Fit one Gaussian per motion (``mixture``) or one over all of them, to the motions' poses and their
+    mirror images; ``floor_deg`` is the standard deviation of the isotropic variance added to every
+    component's covariance."""
     if not sources:
         raise ValueError("build_pose_prior: name at least one motion")
-    poses = motion_poses(sources)
-    samples = np.concatenate([poses, mirror_body_pose(poses)])
-    mean = samples.mean(0)
-    covariance = np.cov(samples, rowvar=False) + math.radians(floor_deg) ** 2 * np.eye(samples.shape[1])
-    whitening = np.linalg.inv(np.linalg.cholesky(covariance))  # L^-1: |L^-1 x|^2 = x^T C^-1 x
-    description = (f"Gaussian over body_pose fitted to {len(samples)} poses of {', '.join(sources)} and their "
-                   f"mirror images, plus an isotropic {floor_deg} degree floor")
-    return PosePrior(torch.as_tensor(mean, dtype=dtype), torch.as_tensor(whitening, dtype=dtype), description)
+    groups = [[source] for source in sources] if mixture else [list(sources)]
+    means, whitenings, log_dets, everything = [], [], [], []
+    for group in groups:
+        poses = motion_poses(group)
+        samples = np.concatenate([poses, mirror_body_pose(poses)])
+        covariance = np.cov(samples, rowvar=False) + math.radians(floor_deg) ** 2 * np.eye(samples.shape[1])
+        cholesky = np.linalg.cholesky(covariance)
+        means.append(samples.mean(0))
+        whitenings.append(np.linalg.inv(cholesky))  # L^-1: |L^-1 x|^2 = x^T C^-1 x
+        log_dets.append(2.0 * np.log(np.diag(cholesky)).sum())
+        everything.append(samples)
+    log_dets = np.array(log_dets)
+    count = sum(len(s) for s in everything)
+    kind = f"a mixture of {len(groups)} Gaussians (one per motion)" if mixture else "one Gaussian"
+    description = (f"{kind} over body_pose fitted to {count} poses of {', '.join(sources)} and their mirror "
+                   f"images, plus an isotropic {floor_deg} degree floor")
+    as_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=dtype)  # noqa: E731
+    return PosePrior(as_tensor(means), as_tensor(whitenings), as_tensor(log_dets - log_dets.min()),
+                     as_tensor(np.concatenate(everything).mean(0)), description)
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ class Fitter:
     def prior(self) -> PosePrior:
         if self._prior is None:
             self._prior = build_pose_prior(self.config.pose_prior_motions, self.config.pose_prior_floor_deg,
-                                           self.model.dtype)
+                                           self.model.dtype, self.config.pose_prior_mixture)
         return self._prior
 
     def image_keypoints(self, person: HumanInputs) -> tuple[np.ndarray, np.ndarray] | None:
