@@ -159,23 +159,18 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
     _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
     raw = load_pipeline_yaml()["02_smpl_fit"]
     centre = cameras[0].centre
-    errors = {}
-    for mode in ("off", "auto"):
-        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {**raw["ground"], "mode": mode}},
-                                     "pipeline.yaml 02_smpl_fit")
-        fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(list(scene.humans.values()))
-        assert floor["applied"] == (mode == "auto")
-        ratios = []
-        for fit in fits:
-            params, true = fit.params, dict(np.load(truth / f"{fit.pid}_body.npz"))
-            rows = np.searchsorted(true["frame_ids"], params.frame_ids)
-            fitted = body_joints(model, params.betas, params.global_orient, params.body_pose, params.transl)[:, 0]
-            real = body_joints(model, true["betas"], true["global_orient"][rows], true["body_pose"][rows],
-                               true["transl"][rows])[:, 0]
-            ratios.append(np.median(np.linalg.norm(fitted - centre, axis=1) / np.linalg.norm(real - centre, axis=1)))
-        errors[mode] = abs(np.log(ratios[0] / ratios[1]))  # how wrong the two are placed relative to each other
-        if mode == "auto":
-            assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
-            assert all(fit.report["ground"]["contact_sole_points"] > 0 for fit in fits)
-    assert errors["auto"] < 0.5 * errors["off"]
-    assert errors["auto"] < 0.05
+    config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
+    fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(list(scene.humans.values()))
+    assert floor["applied"], floor
+    assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
+    ratios = []
+    for fit in fits:
+        assert fit.report["ground"]["contact_sole_points"] > 0
+        params, true = fit.params, dict(np.load(truth / f"{fit.pid}_body.npz"))
+        rows = np.searchsorted(true["frame_ids"], params.frame_ids)
+        fitted = body_joints(model, params.betas, params.global_orient, params.body_pose, params.transl)[:, 0]
+        real = body_joints(model, true["betas"], true["global_orient"][rows], true["body_pose"][rows],
+                           true["transl"][rows])[:, 0]
+        ratios.append(np.median(np.linalg.norm(fitted - centre, axis=1) / np.linalg.norm(real - centre, axis=1)))
+    # placed right relative to each other (alone, the child is placed about 30% too far: docs/fitting.md)
+    assert abs(np.log(ratios[0] / ratios[1])) < 0.05

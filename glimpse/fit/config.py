@@ -24,6 +24,7 @@ class GroundConfig:
     contact_speed_m_s: float
     contact_height_m: float
     normal_prior_m: float
+    standing_thigh_deg: float
     floor_sigma_m: float
     skate_sigma_m_s: float
     shape_ridge: float

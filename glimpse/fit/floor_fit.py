@@ -28,12 +28,14 @@ from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.config import FitConfig, GroundConfig
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, near_own_plane,
-                                person_camera_heights, placement_factors, plane_weights, speed_across_view)
+                                person_camera_heights, placement_factors, plane_weights, speed_across_view,
+                                standing_weights)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import FitEnergy, FloorContact
 from glimpse.scene import HumanInputs
 
+HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
 ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
 STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
 
@@ -59,6 +61,7 @@ class PendingFit:
 class _Feet:
     soles: np.ndarray  # [T, S, 3] world
     up: np.ndarray  # [T, 3] the body's up in the world
+    standing: np.ndarray  # [T] how upright the frame's body stands (1: thighs along -up), weights the up hint
     contact: np.ndarray  # [T, S] bool
 
 
@@ -75,7 +78,9 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     centre = centres[0]
     soles_body = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
     feet = [_feet(p, soles_body, centre, config, fps) for p in pending]
-    up_hint = sum(f.up.mean(0) for f in feet)
+    up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
+    if np.linalg.norm(up_hint) <= 0:
+        return {"applied": False, "reason": "nobody stands upright in any frame (no up to start the floor from)"}
     up_hint = up_hint / np.linalg.norm(up_hint)
     grounded = [lowest_points(f.soles, up_hint) for f in feet]
     normal = floor_normal(grounded, up_hint, g.normal_prior_m)
@@ -139,11 +144,13 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, con
         frame_ids = pending.energy.track.frame_ids.numpy()
         times = pending.energy.track.times_s.numpy()
     with torch.no_grad():
-        soles = soles_body(betas, orient, pose, transl, torch.tensor(scale, dtype=dtype)).keypoints.numpy()
+        out = soles_body(betas, orient, pose, transl, torch.tensor(scale, dtype=dtype))
+    soles, joints = out.keypoints.numpy(), out.joints.numpy()
     up = Rotation.from_rotvec(orient.numpy()).apply([0.0, 1.0, 0.0])
+    standing = standing_weights(up, joints[:, HIPS], joints[:, KNEES], config.ground.standing_thigh_deg)
     g = config.ground
     speed = speed_across_view(soles, times, frame_ids, centre, config.max_interpolated_gap)
-    return _Feet(soles, up, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
+    return _Feet(soles, up, standing, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
 
 def _refit(pending: PendingFit, feet: _Feet, floor: Floor, factor: float, soles_body: KeypointBody,

@@ -66,6 +66,16 @@ def foot_contacts(soles: np.ndarray, up: np.ndarray, speed_m_s: np.ndarray, body
     return low & (speed_m_s / body_scale <= max_speed_m_s)
 
 
+def standing_weights(up: np.ndarray, hips: np.ndarray, knees: np.ndarray, sigma_deg: float) -> np.ndarray:
+    """[T] weights of frames for telling which way is up from the body's own up [T, 3]: exp(-(a / sigma)^2),
+    a the angle between -up and the thighs (hips [T, 2, 3] to knees [T, 2, 3], averaged). A standing or
+    walking body's pelvis is upright; a crouching or sitting one's is often fitted tilted."""
+    thigh = (knees - hips).mean(1)
+    thigh = thigh / np.linalg.norm(thigh, axis=-1, keepdims=True).clip(min=1e-12)
+    angle = np.degrees(np.arccos(np.clip(-(thigh * up).sum(-1), -1.0, 1.0)))
+    return np.exp(-((angle / sigma_deg) ** 2))
+
+
 def lowest_points(soles: np.ndarray, up: np.ndarray) -> np.ndarray:
     """[T, 3] each frame's lowest sole point along ``up`` [3] (soles [T, S, 3]): a standing, walking or
     dancing person has a foot on the floor in nearly every frame, so these sample the floor far more
