@@ -100,7 +100,7 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     for p, f, height, factor in zip(pending, feet, heights, factors):
         p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
-        if p.mode == "keypoints2d" and f.contact.any():
+        if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, floor, float(factor), soles_body, g)
             p.seconds += time.perf_counter() - started

@@ -1,12 +1,13 @@
 """Offline priors for body fitting: no downloaded GMM or VPoser weights.
 
-- **Pose prior**: a mixture of Gaussians over the 69 body-pose numbers, one per motion (the
-  built-in procedural ones by default, plus any AMASS- or smplx-style .npz the user lists), each
-  fitted to that motion's poses and their left-right mirror images, with an isotropic floor
-  variance added so that poses the motions never show stay reachable. Its energy is the
-  mixture's negative log-likelihood (times 2): near one component, that component's squared
-  Mahalanobis distance. A single Gaussian over everything would put a crouch and a walk in one
-  blob whose centre is neither, and pull both towards it. It knows only what the motions do.
+- **Pose prior**: Gaussians over the 69 body-pose numbers fitted to the poses of the given motions
+  (built-in procedural ones, plus any AMASS- or smplx-style .npz the user lists) and their
+  left-right mirror images, with an isotropic floor variance added so that poses the motions never
+  show stay reachable: one Gaussian over all (``mixture=False``, pipeline.yaml's default) or one per
+  motion (their equal-weight mixture). The energy is the negative log-likelihood times 2: for one
+  Gaussian, the squared Mahalanobis distance. One Gaussian puts a crouch and a walk in one blob
+  whose centre is neither and pulls both towards it; the mixture does not, but measured worse on
+  the fixtures' waving people (docs/fitting.md). Either knows only what the motions do.
 - **Joint limits**: the hinge joints (knees, elbows) bend one way only; a squared penalty on the
   axis-angle components outside anatomical ranges (as SMPLify's angle prior, with bounds).
 - **Shape prior**: betas are unit-variance coefficients; energy ``|betas|^2``.
