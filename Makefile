@@ -1,6 +1,6 @@
 # Glimpse: `make demo`, `make all SCENE=dir`, `make <stage> SCENE=dir`, `make test`, `make bench`.
 # Set-up (the virtual environment) lives here; the stage rules live in mk/pipeline.mk, and the DAG they follow
-# is declared once, in glimpse/pipeline/stages.py (`glimpse prepare` writes it for make).
+# is declared once, in glimpse/pipeline/stages.py (`glimpse run` writes it for make, under the run folder's lock).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
@@ -17,27 +17,38 @@ STAGES_DIR ?= stages
 # Worker processes of `make test` (pytest-xdist; each test file stays in one worker, which keeps module fixtures shared).
 TEST_WORKERS ?= 2
 
+# Another defaults file instead of pipeline.yaml (a full copy with your changes).
+PIPELINE_YAML ?=
+# Seconds to wait when another run holds the run folder (0: stop at once, naming it).
+WAIT ?= 0
+
+# What the user gives reaches recipes only through the environment, taken verbatim ($(value): make expands
+# nothing in it) and always used quoted ("$$SCENE"): a path may hold spaces, quotes, backticks, dollars or
+# non-ASCII letters, and no shell ever reads it as code.
+override SCENE := $(value SCENE)
+override VIDEO := $(value VIDEO)
+override OUT := $(value OUT)
+override PARAMS := $(value PARAMS)
+override STAGES_DIR := $(value STAGES_DIR)
+override PIPELINE_YAML := $(value PIPELINE_YAML)
+override WAIT := $(value WAIT)
+export SCENE VIDEO OUT STAGE
+export GLIMPSE_PARAMS := $(PARAMS)
+export GLIMPSE_STAGES_DIR := $(STAGES_DIR)
+export GLIMPSE_LOCK_WAIT := $(WAIT)
+ifneq ($(PIPELINE_YAML),)
+export GLIMPSE_PIPELINE_YAML := $(PIPELINE_YAML)
+endif
+
 PY := $(VENV)/bin/python
 export PYTHONPATH := $(CURDIR)$(if $(PYTHONPATH),:$(PYTHONPATH))
 export OMP_WAIT_POLICY ?= passive
-export GLIMPSE_PARAMS := $(PARAMS)
-# Another defaults file instead of pipeline.yaml (a full copy with your changes).
-PIPELINE_YAML ?=
-ifneq ($(PIPELINE_YAML),)
-export GLIMPSE_PIPELINE_YAML := $(abspath $(PIPELINE_YAML))
-endif
 
 # BlazePose's models for the ingest, taken out of the mediapipe wheel by `make models`.
 MODELS_DIR ?= models/blazepose
-# A video given with VIDEO= becomes the scene folder SCENE (default: OUT/scenes/<video name>) before the stages.
-ifneq ($(VIDEO),)
-$(if $(wildcard $(VIDEO)),,$(error VIDEO=$(VIDEO): no such file))
-SCENE := $(if $(SCENE),$(SCENE),$(OUT)/scenes/$(basename $(notdir $(VIDEO))))
-endif
 
 # The stages are the folders of stages/ (a test checks they are the registry's).
 STAGES := $(sort $(patsubst stages/%/run.py,%,$(wildcard stages/*/run.py)))
-PIPELINE := $(MAKE) --no-print-directory -f mk/pipeline.mk PY=$(abspath $(PY)) OUT=$(OUT) STAGES_DIR=$(STAGES_DIR)
 
 .PHONY: help venv models ingest all validate test bench demo clean-stage print-dag free-body $(STAGES)
 
@@ -50,7 +61,7 @@ help:
 	@echo "make validate SCENE=dir        check a scene against docs/SCENE_FORMAT.md"
 	@echo "make clean-stage STAGE=x SCENE=dir   remove one stage's output"
 	@echo "make test | make bench         tests | benchmarks"
-	@echo "options: OUT=dir (default runs/), PARAMS=\"section.key=value ...\", PIPELINE_YAML=file"
+	@echo "options: OUT=dir (default runs/), PARAMS=\"section.key=value ...\", PIPELINE_YAML=file, WAIT=seconds"
 
 $(VENV)/.installed: requirements.txt requirements-nodeps.txt $(CONSTRAINTS)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -69,41 +80,34 @@ $(MODELS_DIR)/.installed: tools/install_blazepose.py | $(VENV)/.installed
 
 models: $(MODELS_DIR)/.installed
 
-need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene (or VIDEO=clip.mp4) is required))
+need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene is required))
+need-scene-or-video = $(if $(SCENE)$(VIDEO),,$(error SCENE=path/to/scene (or VIDEO=clip.mp4) is required))
 need-video = $(if $(VIDEO),,$(error VIDEO=path/to/video is required))
-
-# The scene of a video, ingested again only when the video is newer (make ingest forces it). PARAMS reach the
-# ingest through GLIMPSE_PARAMS.
-ingest-video = $(PY) -m glimpse ingest "$(VIDEO)" "$(SCENE)"
-ifneq ($(VIDEO),)
-$(SCENE)/scene.yaml: $(VIDEO) | venv models
-	$(ingest-video)
-endif
+# A video given with VIDEO= becomes the scene folder SCENE (default: OUT/scenes/<video name>) before the stages,
+# ingested again only when the video is newer than the scene (`make ingest` always ingests).
+run-stages = $(PY) -m glimpse run --scene "$$SCENE" --video "$$VIDEO" --out "$$OUT"
 
 ingest: venv models
 	$(need-video)
-	$(ingest-video)
+	@$(PY) -m glimpse ingest "$$VIDEO" "$$SCENE" --out "$$OUT"
 
-all: venv $(if $(VIDEO),$(SCENE)/scene.yaml)
-	$(need-scene)
-	@run=$$($(PY) -m glimpse prepare --whole-pipeline --scene "$(SCENE)" --out "$(OUT)") && \
-	  $(PIPELINE) SCENE="$(SCENE)" RUN="$$run" all
+all: venv $(if $(VIDEO),models)
+	$(need-scene-or-video)
+	@$(run-stages)
 
-# `make <stage>`: rerun that stage (-W pretends its parameters changed), building missing or stale prerequisites.
+# `make <stage>`: rerun that stage (as if its parameters had changed), building missing or stale prerequisites.
 $(STAGES): venv
-	$(need-scene)
-	@run=$$($(PY) -m glimpse prepare --scene "$(SCENE)" --out "$(OUT)") && \
-	  $(PIPELINE) SCENE="$(SCENE)" RUN="$$run" -W "$$run/.params/$@.json" "$$run/$@/manifest.json"
+	$(need-scene-or-video)
+	@$(run-stages) --stage $@
 
 validate: venv
 	$(need-scene)
-	@$(PY) -m glimpse validate "$(SCENE)"
+	@$(PY) -m glimpse validate "$$SCENE"
 
 clean-stage: venv
 	$(need-scene)
 	$(if $(filter $(STAGE),$(STAGES)),,$(error STAGE must be one of: $(STAGES)))
-	@run=$$($(PY) -m glimpse run-dir --scene "$(SCENE)" --out "$(OUT)") && \
-	  rm -rf "$$run/$(STAGE)" "$$run/.work/$(STAGE)" && echo "removed $$run/$(STAGE)"
+	@$(PY) -m glimpse clean-stage --scene "$$SCENE" --out "$$OUT" "$$STAGE"
 
 print-dag: venv
 	@$(PY) -m glimpse.pipeline.stages
@@ -123,4 +127,4 @@ free-body:
 	PYTHONPATH=$(CURDIR) $(TOOLS_VENV)/bin/python tools/make_free_body.py --out glimpse/body/assets/free_body.npz
 
 demo: venv
-	@$(PY) -m glimpse.demo --out "$(OUT)"
+	@$(PY) -m glimpse.demo --out "$$OUT"

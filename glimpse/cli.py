@@ -1,8 +1,14 @@
 """``python -m glimpse`` / ``glimpse``: the commands the Makefile and users call.
 
-  glimpse ingest VIDEO SCENE_DIR         a video -> a scene: frames, every person found and tracked (keypoints,
-                                         masks), a preview video and a tracks report (docs/ingest.md)
+  glimpse ingest VIDEO [SCENE_DIR]       a video -> a scene: frames, every person found and tracked (keypoints,
+                                         masks), a preview video and a tracks report (docs/ingest.md); SCENE_DIR
+                                         defaults to OUT/scenes/<video name>
   glimpse validate SCENE                 check a scene against glimpse-scene/1
+  glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
+                                         lock the run folder and run the stages that are out of date (make all),
+                                         or rerun stage X (make X); a video is ingested first when it is newer
+  glimpse clean-stage --scene S --out O STAGE
+                                         remove one stage's output and work folder (under the run's lock)
   glimpse prepare --scene S --out O [--whole-pipeline]
                                          validate, resolve parameters, write .params/.inputs; print the run folder
   glimpse params --scene S --stage X     print the resolved parameters one stage reads
@@ -21,10 +27,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 from pathlib import Path
 
 from glimpse.errors import GlimpseError
+
+# Exit status of `glimpse run` when a stage failed (bad input is 2).
+STAGE_FAILED = 1
 
 
 def _params_default() -> str:
@@ -36,10 +46,24 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p_ingest = sub.add_parser("ingest", help="a video -> a glimpse-scene/1 folder (docs/ingest.md)")
     p_ingest.add_argument("video", type=Path)
-    p_ingest.add_argument("scene", type=Path, help="the scene folder to write (replaced when the ingest succeeds)")
+    p_ingest.add_argument("scene", nargs="?", default="", help="the scene folder to write (replaced when the ingest "
+                                                               "succeeds; default OUT/scenes/<video name>)")
+    p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
     p_val = sub.add_parser("validate", help="check a scene folder against glimpse-scene/1")
     p_val.add_argument("scene", type=Path)
+    p_run = sub.add_parser("run", help="run the stages that are out of date (what make all and make <stage> call)")
+    p_run.add_argument("--scene", default="", help="scene folder (glimpse-scene/1); with --video, where it goes")
+    p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it")
+    p_run.add_argument("--out", type=Path, default=Path("runs"))
+    p_run.add_argument("--stage", default=None, help="rerun this stage (and what it needs), not the whole pipeline")
+    p_run.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
+    p_run.add_argument("--wait", type=float, default=None, help="seconds to wait when another run holds the run "
+                                                                "folder (default $GLIMPSE_LOCK_WAIT, else 0)")
+    p_clean = sub.add_parser("clean-stage", help="remove one stage's output (make clean-stage)")
+    p_clean.add_argument("--scene", required=True, type=Path)
+    p_clean.add_argument("--out", type=Path, default=Path("runs"))
+    p_clean.add_argument("stage")
     for name in ("prepare", "params", "run-dir"):
         p = sub.add_parser(name)
         p.add_argument("--scene", required=True, type=Path)
@@ -81,13 +105,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    from glimpse.pipeline.prepare import prepare_run, scene_name
+    from glimpse.pipeline.prepare import locate_run, prepare_run, run_lock
 
     if args.command == "ingest":
         from glimpse.ingest.config import load_ingest_config
-        from glimpse.ingest.stage import ingest
+        from glimpse.ingest.stage import default_scene_dir, ingest
 
-        ingest(args.video, args.scene, load_ingest_config(args.params))
+        ingest(args.video, Path(args.scene) if args.scene else default_scene_dir(args.video, args.out),
+               load_ingest_config(args.params))
         return 0
     if args.command == "validate":
         from glimpse.errors import SceneError
@@ -102,6 +127,21 @@ def _dispatch(args: argparse.Namespace) -> int:
             raise SceneError(str(args.scene), violations)
         check_runnable(args.scene)
         print(f"{args.scene}: valid glimpse-scene/1, and the pipeline can run it")
+        return 0
+    if args.command == "run":
+        return _run(args)
+    if args.command == "clean-stage":
+        from glimpse.pipeline.stages import stage_spec
+
+        try:
+            stage_spec(args.stage)
+        except ValueError as exc:
+            raise GlimpseError(str(exc)) from None
+        run = locate_run(args.scene, args.out)
+        with run_lock(run, f"clean-stage {args.stage}"):
+            for folder in (run.stage_dir(args.stage), run.work_dir(args.stage)):
+                shutil.rmtree(folder, ignore_errors=True)
+        print(f"removed {run.stage_dir(args.stage)}")
         return 0
     if args.command == "export":
         from glimpse.export.run import export_run
@@ -121,7 +161,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(f"rendered {out}")
         return 0
     if args.command == "run-dir":
-        print(args.out / scene_name(args.scene))
+        print(locate_run(args.scene, args.out).root)
         return 0
     if args.command == "params":
         from glimpse.pipeline.stages import stage_spec
@@ -130,12 +170,38 @@ def _dispatch(args: argparse.Namespace) -> int:
             stage_spec(args.stage)
         except ValueError as exc:
             raise GlimpseError(str(exc)) from None
-    run, _ = prepare_run(args.scene, args.out, args.params, getattr(args, "whole_pipeline", False))
+    whole = getattr(args, "whole_pipeline", False)
+    with run_lock(locate_run(args.scene, args.out, whole, args.params), f"glimpse {args.command}"):
+        run, _ = prepare_run(args.scene, args.out, args.params, whole)
     if args.command == "prepare":
         print(run.root)
     else:
         print(json.dumps(json.loads(run.params_file(args.stage).read_text())["params"], indent=2))
     return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    """``glimpse run``: ingest a newer video, then let make run the stages; make's status is returned."""
+    from glimpse.pipeline.make import run_stages
+
+    if not args.scene and not args.video:
+        raise GlimpseError("glimpse run needs --scene SCENE_DIR or --video VIDEO")
+    scene = Path(args.scene) if args.scene else None
+    if args.video:
+        from glimpse.ingest.config import load_ingest_config
+        from glimpse.ingest.stage import default_scene_dir, ingest
+
+        video = Path(args.video)
+        if not video.is_file():
+            raise GlimpseError(f"{video}: no such video file")
+        scene = scene or default_scene_dir(video, args.out)
+        stamp = scene / "scene.yaml"
+        if not stamp.is_file() or video.stat().st_mtime_ns > stamp.stat().st_mtime_ns:
+            ingest(video, scene, load_ingest_config(args.params))
+    stages_dir = os.environ.get("GLIMPSE_STAGES_DIR") or None
+    status = run_stages(scene, args.out, args.params, args.stage, sys.executable,
+                        Path(stages_dir) if stages_dir else None, args.wait)
+    return STAGE_FAILED if status else 0
 
 
 if __name__ == "__main__":

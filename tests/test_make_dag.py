@@ -1,6 +1,6 @@
 """The Makefile DAG, end to end through make: reruns exactly what changed.
 
-The real Makefile, mk/pipeline.mk, `glimpse prepare` and the stage runner are
+The real Makefile, mk/pipeline.mk, `glimpse run` and the stage runner are
 used; only the stage bodies are replaced (STAGES_DIR) by scripts that record
 that they ran, so the test does not depend on which stages have landed.
 """
@@ -9,9 +9,7 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,62 +18,12 @@ from PIL import Image
 
 from glimpse.pipeline.prepare import prepare_run
 from glimpse.pipeline.stages import STAGES, STAGE_NAMES
-from glimpse.scene import SceneWriter
-
-REPO = Path(__file__).resolve().parent.parent
-
-STAGE_SCRIPT = """
-import json, os, sys, time
-sys.path.insert(0, {repo!r})
-from glimpse.pipeline.runner import stage_main
-STAGE = {stage!r}
-def body(ctx):
-    with open(os.environ["RAN_LOG"], "a") as f:
-        f.write(STAGE + "\\n")
-    (ctx.out / "partial.txt").write_text("started")
-    if os.environ.get("SLOW_STAGE") == STAGE:
-        time.sleep(120)
-    (ctx.out / "params.json").write_text(json.dumps(ctx.params, sort_keys=True))
-stage_main(STAGE, body, "test stage")
-"""
-
-
-def write_tiny_scene(root: Path) -> None:
-    scene = SceneWriter(root, "tiny", 10, "static")
-    rng = np.random.default_rng(0)
-    for i in range(3):
-        scene.frame(i, rng.integers(0, 255, (12, 16, 3), dtype=np.uint8))
-    keypoints = np.concatenate([rng.uniform(0, 12, (3, 17, 2)), np.ones((3, 17, 1))], axis=2)
-    scene.keypoints2d("p0", np.arange(3), "coco17", keypoints)  # the pipeline runs only scenes with people
-    scene.finish()
+from tests.make_helpers import REPO, make, make_setup, ran
 
 
 @pytest.fixture()
 def setup(tmp_path):
-    scene, out, stages_dir = tmp_path / "scene", tmp_path / "out", tmp_path / "stages"
-    write_tiny_scene(scene)
-    for name in STAGE_NAMES:
-        (stages_dir / name).mkdir(parents=True)
-        (stages_dir / name / "run.py").write_text(STAGE_SCRIPT.format(repo=str(REPO), stage=name))
-    defaults = yaml.safe_load((REPO / "pipeline.yaml").read_text())
-    for name in STAGE_NAMES:  # a test-only parameter in every stage's section (the test's own copy)
-        defaults.setdefault(name, {})["knob"] = 1
-    pipeline_yaml = tmp_path / "pipeline.yaml"
-    pipeline_yaml.write_text(yaml.safe_dump(defaults))
-    log = tmp_path / "ran.log"
-    log.write_text("")
-    env = dict(os.environ, RAN_LOG=str(log))
-    args = ["make", "-C", str(REPO), f"SCENE={scene}", f"OUT={out}", f"STAGES_DIR={stages_dir}",
-            f"PIPELINE_YAML={pipeline_yaml}", f"PY={sys.executable}"]
-    return scene, out, log, env, args
-
-
-def make(args, env, *extra, target="all"):
-    return subprocess.run([*args, target, *extra], env=env, capture_output=True, text=True, timeout=300)
-
-
-def ran(log: Path, since: int) -> list[str]:
-    return log.read_text().split()[since:]
+    return make_setup(tmp_path, tmp_path / "scene", tmp_path / "out")
 
 
 def test_the_stage_folders_are_the_registry_and_make_follows_its_dag(setup):
@@ -88,8 +36,8 @@ def test_the_stage_folders_are_the_registry_and_make_follows_its_dag(setup):
             name, _, upstream = line.removeprefix("DEPS_").partition(":=")
             dag[name.strip()] = tuple(upstream.split())
     assert dag == {s.name: s.upstream for s in STAGES}
-    dry = subprocess.run(["make", "-n", "-C", str(REPO), "-f", "mk/pipeline.mk", f"RUN={run.root}", f"SCENE={scene}",
-                          f"OUT={out}", "PY=python", "all"], capture_output=True, text=True)  # what make would run
+    dry = subprocess.run(["make", "-n", "-C", str(run.root), "-f", str(REPO / "mk" / "pipeline.mk"), "all"],
+                         capture_output=True, text=True)  # what make would run
     assert dry.returncode == 0, dry.stderr
     commands = [line for line in dry.stdout.splitlines() if "/run.py" in line]
     assert [c.split("/run.py")[0].rsplit("/", 1)[1] for c in commands] == list(STAGE_NAMES)
@@ -174,7 +122,7 @@ def test_a_stage_that_reads_a_shared_key_it_does_not_declare_is_not_published(se
     assert not (out / "tiny" / "01_sfm").exists()
     runner.run_stage("01_sfm", scene, out, "", lambda ctx: ctx.section("compute").seed)
     manifest = json.loads((out / "tiny" / "01_sfm" / "manifest.json").read_text())
-    assert manifest["params"]["compute"] == {"seed": 0, "threads": 2} and set(manifest["params"]) == {"01_sfm", "compute"}
+    assert manifest["params"]["compute"] == {"seed": 0} and set(manifest["params"]) == {"01_sfm", "compute"}
 
 
 def test_a_killed_stage_leaves_the_previous_output(setup):

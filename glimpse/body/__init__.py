@@ -4,7 +4,7 @@ skinning of Gaussians, and motion input.
     from glimpse.body import BodyModel, keypoint_map, bake_skin_weight_grid, load_motion
 
 Names are imported on first use, so that light modules (``glimpse.body.config``,
-read by every ``make`` through ``glimpse prepare``) do not pay for importing torch.
+read by every ``make`` through ``glimpse run``) do not pay for importing torch.
 """
 
 from importlib import import_module

@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
-from glimpse.render import Camera
+if TYPE_CHECKING:  # torch is imported where it is used: reading a scene (make's every step) does not need it
+    import torch
+
+    from glimpse.render import Camera
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,10 @@ def default_intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
 
 def render_camera(camera: PinholeCamera, device: torch.device) -> Camera:
     """The rasterizer's camera (float32 tensors on ``device``) for ``camera``."""
+    import torch
+
+    from glimpse.render import Camera
+
     def tensor(a: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.asarray(a, dtype=np.float32), device=device)
 

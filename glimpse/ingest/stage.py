@@ -16,6 +16,7 @@ leaves a previous scene there untouched.
 from __future__ import annotations
 
 import logging
+import re
 import shutil
 import tempfile
 import time
@@ -128,6 +129,18 @@ def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: flo
     }
 
 
+def scene_name_of(video: Path) -> str:
+    """The scene name a video gets: its file name without extension, every character a scene name may not
+    hold (SCENE_FORMAT.md: letters, digits, _, - and .) replaced by _."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(video).stem)
+    return "video" if set(name) <= {"."} else name
+
+
+def default_scene_dir(video: Path, out_root: Path) -> Path:
+    """Where ``make all VIDEO=...`` keeps a video's scene when no SCENE is given: OUT/scenes/<scene name>."""
+    return Path(out_root) / "scenes" / scene_name_of(video)
+
+
 def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     """Ingest ``video`` into ``scene_dir`` (see the module docstring); returns the tracks report."""
     video, scene_dir = Path(video), Path(scene_dir)
@@ -139,7 +152,7 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
              survey.info.width, survey.info.height, survey.fps, len(survey.chosen), survey.width, survey.height,
              survey.motion.motion)
     scene_dir.parent.mkdir(parents=True, exist_ok=True)
-    writer = SceneWriter(scene_dir, video.stem, survey.fps, "static" if survey.static else "moving")
+    writer = SceneWriter(scene_dir, scene_name_of(video), survey.fps, "static" if survey.static else "moving")
     try:
         with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
             report = _track_and_write(video, survey, config, writer, Path(work_dir),

@@ -4,6 +4,10 @@ A checkpoint is one ``torch.save`` file written atomically (a temporary file, th
 rename), so a run killed while saving leaves the previous checkpoint intact. It carries a
 fingerprint of everything the run depends on (parameters, upstream manifests): a
 checkpoint of another configuration is never resumed, only reported and replaced.
+
+Checkpoints are read with ``torch.load(weights_only=True)``: tensors, numbers, strings and
+containers only, never an object whose unpickling could run code (a run folder may come from
+someone else). A checkpoint holding anything else is refused and the stage starts afresh.
 """
 
 from __future__ import annotations
@@ -38,8 +42,8 @@ def load_checkpoint(path: Path, key: str) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        saved = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # a truncated or foreign file: start afresh, say why
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated, foreign, or holding objects: start afresh, say why
         log.warning("ignoring unreadable checkpoint %s (%s)", path, exc)
         return None
     if not isinstance(saved, dict) or saved.get("format") != CHECKPOINT_FORMAT:

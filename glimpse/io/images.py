@@ -14,10 +14,13 @@ import re
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 from PIL import Image, UnidentifiedImageError
+
+if TYPE_CHECKING:  # reading and checking images (every make step) does not import torch
+    import torch
 
 __all__ = [
     "ImageInfo",

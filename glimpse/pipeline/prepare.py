@@ -10,13 +10,14 @@ stages whose parameters or inputs changed, and their descendants.
 
 from __future__ import annotations
 
+import copy
 import fnmatch
 import hashlib
 import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ContextManager
 
 import yaml
 
@@ -28,14 +29,19 @@ from glimpse.config import (
     parse_cli_params,
     resolve_params,
 )
-from glimpse.errors import SceneError
-from glimpse.pipeline.stages import STAGES, StageSpec, dag_makefile
+from glimpse.errors import ConfigError, GlimpseError, SceneError
+from glimpse.locks import exclusive_lock
+from glimpse.pipeline.stages import NOT_RESULT_KEYS, STAGES, StageSpec, dag_makefile
 from glimpse.scene.runnable import check_runnable
 
 PARAMS_FORMAT = "glimpse-params/1"
 INPUTS_FORMAT = "glimpse-inputs/1"
-VALIDATION_CACHE_FORMAT = "glimpse-validation-cache/1"
-HASH_CACHE_FORMAT = "glimpse-hash-cache/1"
+VALIDATION_CACHE_FORMAT = "glimpse-validation-cache/2"
+HASH_CACHE_FORMAT = "glimpse-hash-cache/2"
+# The environment variable naming a run lock handed down to child processes, and the one saying how long to
+# wait for a busy run folder.
+RUN_LOCK_ENV = "GLIMPSE_RUN_LOCK"
+LOCK_WAIT_ENV = "GLIMPSE_LOCK_WAIT"
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,11 @@ class RunPaths:
     def cache_dir(self) -> Path:
         return self.root / ".cache"
 
+    @property
+    def lock_file(self) -> Path:
+        """Held by whoever runs stages in this folder (``run_lock``)."""
+        return self.root / ".lock"
+
 
 def write_if_changed(path: Path, text: str) -> bool:
     """Write ``text`` to ``path`` atomically unless it already holds exactly that."""
@@ -95,8 +106,10 @@ def _scene_files(scene_root: Path) -> list[str]:
 
 
 def _stat_key(path: Path) -> list[int]:
+    """What says a file is unchanged without reading it: size, mtime, and the change time and inode, which
+    no copy tool can set (``cp -p``, ``rsync -t`` and tar restore mtimes, so size and mtime alone could lie)."""
     st = path.stat()
-    return [st.st_size, st.st_mtime_ns]
+    return [st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino]
 
 
 def _code_hash(folder: Path) -> str:
@@ -107,7 +120,7 @@ def _code_hash(folder: Path) -> str:
 
 
 def validate_cached(scene_root: Path, cache_dir: Path) -> None:
-    """Validate the scene unless an identical scene (same files, sizes, mtimes)
+    """Validate the scene unless an identical scene (same files, each unchanged by ``_stat_key``)
     already passed with the same validator code; raise SceneError otherwise."""
     from glimpse.scene import validate_scene
 
@@ -132,7 +145,7 @@ def validate_cached(scene_root: Path, cache_dir: Path) -> None:
 
 
 class HashCache:
-    """sha256 of scene files, remembered by (size, mtime) so unchanged files are not reread."""
+    """sha256 of scene files, remembered by ``_stat_key`` so unchanged files are not reread."""
 
     def __init__(self, path: Path):
         self.path = path
@@ -177,8 +190,8 @@ def scene_input_hashes(scene_root: Path, spec: StageSpec, hashes: HashCache) -> 
 
 
 def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
-    """The parameters one stage reads: its own section whole, and of the shared sections only the keys it
-    declares (nested as in pipeline.yaml)."""
+    """The parameters one stage's results depend on: its own section whole, and of the shared sections only
+    the keys it declares (nested as in pipeline.yaml); never the NOT_RESULT_KEYS."""
     recorded: dict[str, Any] = {}
     for key in spec.reads:
         pattern, *path = key.split(".")
@@ -189,8 +202,15 @@ def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
             if path:
                 target[path[-1]] = source[path[-1]]
             else:
-                recorded[section] = params[section]
-    recorded[spec.name] = params.get(spec.name, {})
+                recorded[section] = copy.deepcopy(params[section])
+    recorded[spec.name] = copy.deepcopy(params.get(spec.name, {}))
+    for key in NOT_RESULT_KEYS:
+        pattern, *path = key.split(".")
+        for section in fnmatch.filter(recorded, pattern):
+            parent = recorded[section]
+            for part in path[:-1]:
+                parent = parent.get(part, {})
+            parent.pop(path[-1], None)
     return recorded
 
 
@@ -199,30 +219,84 @@ def scene_name(scene_root: Path) -> str:
     return str(yaml.safe_load((scene_root / "scene.yaml").read_text())["name"])
 
 
-def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "", whole_pipeline: bool = False
-                ) -> tuple[RunPaths, Params]:
-    """Validate, resolve and write the .dag.mk and the .params/.inputs files of every stage.
+def locate_run(scene_root: Path, out_root: Path, whole_pipeline: bool = False, cli_params: str = "") -> RunPaths:
+    """Where the scene's run lives, after checking the scene (validated, cached in ``OUT/.cache``) and the
+    parameters (resolved with ``cli_params``).
 
     ``whole_pipeline`` (``make all``): also refuse, with SceneNotRunnable, a valid scene that the pipeline
     cannot run to the end (no people, a person with masks only); one stage alone (``make 01_sfm``) may still run.
-    Returns the run's paths and every resolved parameter. Raises SceneError, SceneNotRunnable or ConfigError
-    on bad input, before anything under ``out_root`` is touched except the validation cache.
+    Raises SceneError, SceneNotRunnable or ConfigError before anything under ``out_root`` is touched except
+    the cache.
     """
     scene_root = Path(scene_root)
     if not (scene_root / "scene.yaml").is_file():
         from glimpse.errors import Violation
 
         raise SceneError(str(scene_root), [Violation("scene.yaml", "the scene folder must contain scene.yaml", "no such file")])
+    check_writable(Path(out_root))
     validate_cached(scene_root, Path(out_root) / ".cache")
     if whole_pipeline:
         check_runnable(scene_root)
+    resolve_scene_params(scene_root, cli_params)
+    return RunPaths(Path(out_root) / scene_name(scene_root))
+
+
+def check_writable(out_root: Path) -> None:
+    """GlimpseError, naming the folder, when runs cannot be written under ``out_root``."""
+    try:
+        out_root.mkdir(parents=True, exist_ok=True)
+        probe = out_root / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        raise GlimpseError(f"OUT={out_root}: cannot write runs there ({exc.strerror or exc}); choose another "
+                           f"output folder with OUT=... (--out)") from None
+
+
+def resolve_scene_params(scene_root: Path, cli_params: str) -> Params:
+    """Every parameter: pipeline.yaml < the scene's overrides < ``cli_params``; ConfigError when one is
+    unknown or invalid, or when the scene's body model and ``body`` disagree."""
     scene_yaml = yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}
     params = resolve_params(load_pipeline_yaml(), scene_yaml.get("overrides") or {}, parse_cli_params(cli_params),
                             str(scene_root / "scene.yaml"))
     if any(scene_root.glob("humans/*/smpl.npz")):
         body = config_from_mapping(BodyConfig, params["body"], "body")
         check_scene_body_model(scene_yaml.get("body_model", "free"), body, str(scene_root / "scene.yaml"))
-    run = RunPaths(Path(out_root) / scene_name(scene_root))
+    return params
+
+
+def run_lock(run: RunPaths, purpose: str, wait_s: float | None = None) -> ContextManager[int]:
+    """The run folder's lock (``OUT/<scene>/.lock``), handed down to the processes it starts; ``wait_s``
+    (default: $GLIMPSE_LOCK_WAIT, else 0) is how long to wait for another holder before refusing."""
+    if wait_s is None:
+        wait_s = lock_wait_s()
+    return exclusive_lock(run.lock_file, purpose, wait_s, RUN_LOCK_ENV,
+                          hint="Wait for it to finish, or ask to wait: make WAIT=<seconds> or --wait <seconds>.")
+
+
+def lock_wait_s() -> float:
+    """Seconds to wait for a busy run folder, from $GLIMPSE_LOCK_WAIT (make WAIT=...); 0 when unset."""
+    text = os.environ.get(LOCK_WAIT_ENV, "").strip() or "0"
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value >= 0:
+        raise ConfigError(f"{LOCK_WAIT_ENV} (make WAIT=...) must be a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "", whole_pipeline: bool = False
+                ) -> tuple[RunPaths, Params]:
+    """Check the scene (``locate_run``), resolve and write the .dag.mk and the .params/.inputs files of every
+    stage. The caller holds the run's lock (``run_lock``).
+
+    Returns the run's paths and every resolved parameter. Raises SceneError, SceneNotRunnable or ConfigError
+    on bad input, before anything under ``out_root`` is touched except the validation cache.
+    """
+    scene_root = Path(scene_root)
+    run = locate_run(scene_root, out_root, whole_pipeline)
+    params = resolve_scene_params(scene_root, cli_params)
     hashes = HashCache(run.cache_dir / "hashes.json")
     write_if_changed(run.dag_file, dag_makefile())
     for spec in STAGES:
@@ -232,14 +306,8 @@ def prepare_run(scene_root: Path, out_root: Path, cli_params: str = "", whole_pi
         )
         write_if_changed(
             run.inputs_file(spec.name),
-            canonical_json(
-                {
-                    "format": INPUTS_FORMAT,
-                    "stage": spec.name,
-                    "scene": str(scene_root.resolve()),
-                    "files": scene_input_hashes(scene_root, spec, hashes),
-                }
-            ),
+            canonical_json({"format": INPUTS_FORMAT, "stage": spec.name,
+                            "files": scene_input_hashes(scene_root, spec, hashes)}),
         )
     hashes.save()
     return run, params

@@ -1,7 +1,8 @@
 """Running one stage: parse arguments, load inputs, call the stage body, publish
 its outputs atomically with a manifest.
 
-A stage writes every file into ``OUT/<scene>/.tmp/<stage>-<pid>/``. Only when the
+A stage holds the run folder's lock (``OUT/<scene>/.lock``, or the one ``glimpse run`` hands down)
+and writes every file into ``OUT/<scene>/.tmp/<stage>-<host>-<pid>/``. Only when the
 body returns without error is ``manifest.json`` written there (last), and the
 folder swapped into ``OUT/<scene>/<stage>/``; the previous output survives any
 failure or interruption untouched. Work in progress that should survive a crash
@@ -15,6 +16,7 @@ import json
 import logging
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import time
@@ -26,7 +28,8 @@ from typing import Any, Callable, Iterator
 from glimpse import __version__
 from glimpse.config import config_from_mapping, tracking_reads
 from glimpse.errors import GlimpseError
-from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, prepare_run
+from glimpse.locks import process_alive
+from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, locate_run, prepare_run, run_lock
 from glimpse.pipeline.stages import STAGE_NAMES, StageSpec, stage_spec
 
 MANIFEST_FORMAT = "glimpse-manifest/1"
@@ -158,7 +161,13 @@ def _check_reads(spec: StageSpec, reads: set[str]) -> None:
 
 
 def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]) -> Path:
-    """Prepare, run ``body`` in a temporary folder, publish; return the output folder."""
+    """Lock the run folder, prepare, run ``body`` in a temporary folder, publish; return the output folder."""
+    with run_lock(locate_run(scene_root, out_root, cli_params=cli_params), f"stage {stage}"):
+        return _run_locked(stage, scene_root, out_root, cli_params, body)
+
+
+def _run_locked(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]
+                ) -> Path:
     spec = stage_spec(stage)
     run, resolved = prepare_run(scene_root, out_root, cli_params)
     params_doc = json.loads(run.params_file(stage).read_text())
@@ -169,9 +178,8 @@ def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, bod
             raise GlimpseError(f"stage {stage} needs {up} first: run `make {stage} SCENE={scene_root}` to build it")
     tmp_root = run.root / ".tmp"
     tmp_root.mkdir(parents=True, exist_ok=True)
-    for stale in tmp_root.glob(f"{stage}-*"):  # leftovers of killed runs
-        shutil.rmtree(stale, ignore_errors=True)
-    tmp = tmp_root / f"{stage}-{os.getpid()}"
+    remove_orphans(tmp_root, f"{stage}-")
+    tmp = tmp_root / temp_name(stage)
     tmp.mkdir()
     ctx = StageContext(
         stage=stage, scene_root=Path(scene_root), run=run, out=tmp, work=run.work_dir(stage), params=params_doc["params"],
@@ -188,6 +196,24 @@ def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, bod
         shutil.rmtree(tmp, ignore_errors=True)
     shutil.rmtree(ctx.work, ignore_errors=True)
     return run.stage_dir(stage)
+
+
+def temp_name(prefix: str) -> str:
+    """A temporary folder's name that says who writes it: ``<prefix>-<host>-<pid>``."""
+    return f"{prefix}-{socket.gethostname()}-{os.getpid()}"
+
+
+def remove_orphans(folder: Path, prefix: str) -> None:
+    """Delete the temporary folders ``<prefix><host>-<pid>`` in ``folder`` whose writer is dead: a process
+    of this machine that no longer exists, or any process of another machine (the caller holds the run's
+    lock, so no other machine can be writing here)."""
+    host = socket.gethostname()
+    for path in folder.glob(f"{prefix}*"):
+        owner_host, _, pid = path.name[len(prefix):].rpartition("-")
+        if owner_host == host and pid.isdigit() and process_alive(int(pid)) and int(pid) != os.getpid():
+            log.warning("keeping %s: process %s that writes it is still running", path, pid)
+            continue
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def stage_main(stage: str, body: Callable[[StageContext], None], description: str) -> None:

@@ -89,13 +89,17 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
+# Parameters that decide how a stage runs, not what it produces (dotted; the section may be a pattern):
+# kept out of the .params stamps, so changing them reruns nothing. Threads change at most float rounding
+# (and COLMAP's results when 01_sfm.deterministic is false); checkpoints only where a run may resume.
+NOT_RESULT_KEYS: tuple[str, ...] = ("compute.threads", "*.checkpoint_every")
 # The shared sections of pipeline.yaml (patterns): every other section is one stage's own.
 SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_*", "diffusion")
 
 
 def dag_makefile(stages: tuple[StageSpec, ...] = STAGES) -> str:
     """The DAG as make variables (``STAGES``, ``DEPS_<stage>``), for mk/pipeline.mk to include."""
-    lines = ["# Written by `glimpse prepare` from glimpse/pipeline/stages.py, the DAG's one declaration.",
+    lines = ["# Written by `glimpse run` from glimpse/pipeline/stages.py, the DAG's one declaration.",
              f"STAGES := {' '.join(spec.name for spec in stages)}"]
     lines += [f"DEPS_{spec.name} := {' '.join(spec.upstream)}".rstrip() for spec in stages]
     return "\n".join(lines) + "\n"

@@ -2,7 +2,11 @@
 first use, cached.
 
 The build cache is keyed by the source, the flags and torch's version, under
-$GLIMPSE_CACHE (default ~/.cache/glimpse). Flags are portable (-O3 -mavx2 -mfma, plus
+$GLIMPSE_CACHE (default ~/.cache/glimpse). The sources are copied into it and built from
+there, so every checkout of one version shares one build (torch's loader records the
+sources' paths). One process builds at a time, under a lock (glimpse.locks) that a killed
+build never leaves behind; a process that waits longer than $GLIMPSE_BUILD_WAIT_S seconds
+(default 900) stops with a message naming the builder. Flags are portable (-O3 -mavx2 -mfma, plus
 three that allow vectorised selects, see COMMON_FLAGS;
 never -march=native, so a shared cache never holds code another CPU cannot run);
 a CPU without AVX2/FMA, or a compiler that refuses those flags, gets a plain -O3
@@ -14,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import shutil
 from functools import lru_cache
 from pathlib import Path
 from types import ModuleType
@@ -22,6 +27,7 @@ import torch
 from torch import Tensor
 
 from glimpse.errors import GlimpseError
+from glimpse.locks import LockBusy, exclusive_lock
 from glimpse.render.binning import TileBins
 
 log = logging.getLogger("glimpse")
@@ -33,6 +39,9 @@ SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "pos
 COMMON_FLAGS = ["-O3", "-fno-math-errno", "-fno-trapping-math", "-fno-signed-zeros", "-ffinite-math-only",
                 "-fopenmp", "-std=c++17"]
 SIMD_FLAGS = ["-mavx2", "-mfma"]
+# Seconds a process waits for another one building the same extension (environment, not a pipeline parameter:
+# it changes no result).
+BUILD_WAIT_ENV, BUILD_WAIT_DEFAULT_S = "GLIMPSE_BUILD_WAIT_S", 900.0
 
 
 def _cpu_has_simd() -> bool:
@@ -41,6 +50,14 @@ def _cpu_has_simd() -> bool:
     except OSError:
         return False
     return " avx2" in flags and " fma" in flags
+
+
+def _build_wait_s() -> float:
+    text = os.environ.get(BUILD_WAIT_ENV, "") or str(BUILD_WAIT_DEFAULT_S)
+    try:
+        return float(text)
+    except ValueError:
+        raise GlimpseError(f"{BUILD_WAIT_ENV} must be a number of seconds, got {text!r}") from None
 
 
 def _build(flags: list[str]) -> ModuleType:
@@ -52,21 +69,33 @@ def _build(flags: list[str]) -> ModuleType:
     key = digest.hexdigest()[:12]
     name = f"glimpse_composite_cpu_{key}"
     root = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "extensions" / name
-    root.mkdir(parents=True, exist_ok=True)
-    if not (root / f"{name}.so").exists():
-        log.info("building the C++ rasterizer (%s), once: about a minute", " ".join(flags))
-    return load(name=name, sources=[str(s) for s in SOURCES], extra_cflags=flags, extra_ldflags=["-fopenmp"],
-                build_directory=str(root), verbose=False)
+    with exclusive_lock(root.with_name(f"{name}.lock"), "building the C++ rasterizer", _build_wait_s(),
+                        hint=f"If it hangs, stop it; or wait longer with {BUILD_WAIT_ENV}=<seconds>."):
+        (root / "lock").unlink(missing_ok=True)  # torch's own build marker, left behind by a killed build
+        sources = []
+        for source in SOURCES:  # one path for every checkout: ninja then sees nothing to rebuild
+            copy = root / "src" / source.name
+            if not copy.is_file() or copy.read_bytes() != source.read_bytes():
+                copy.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(source, copy)
+            sources.append(str(copy))
+        if not (root / f"{name}.so").exists():
+            log.info("building the C++ rasterizer (%s), once: about a minute", " ".join(flags))
+        return load(name=name, sources=sources, extra_cflags=flags, extra_ldflags=["-fopenmp"],
+                    build_directory=str(root), verbose=False)
 
 
 @lru_cache(maxsize=1)
 def extension() -> ModuleType:
-    """The compiled kernel; GlimpseError when no build works (use the `torch` backend)."""
+    """The compiled kernel; GlimpseError when no build works (use the `torch` backend), LockBusy when another
+    process has been building it for too long."""
     attempts = [COMMON_FLAGS + SIMD_FLAGS, COMMON_FLAGS] if _cpu_has_simd() else [COMMON_FLAGS]
     errors = []
     for flags in attempts:
         try:
             return _build(flags)
+        except LockBusy:
+            raise
         except Exception as exc:  # a compiler error, a missing compiler: try the next flags
             errors.append(f"{' '.join(flags)}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else exc!r}")
     raise GlimpseError("cannot build the C++ rasterizer (render.backend=cpu): " + "; ".join(errors)
@@ -74,8 +103,11 @@ def extension() -> ModuleType:
 
 
 def available() -> bool:
+    """Whether the kernel builds here (a build that waits too long for another process raises LockBusy)."""
     try:
         extension()
+    except LockBusy:
+        raise
     except GlimpseError:
         return False
     return True

@@ -1,5 +1,5 @@
 """What a valid scene still needs before the pipeline can run it: people, each with data stage 02 can place
-a body from. Checked by ``glimpse validate`` and at the start of every ``make all`` (``glimpse prepare``),
+a body from. Checked by ``glimpse validate`` and at the start of every ``make all`` (``glimpse run``),
 so that such a scene stops before any stage instead of failing in stage 02 or 04."""
 
 from __future__ import annotations

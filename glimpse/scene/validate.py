@@ -10,6 +10,7 @@ missing) are skipped rather than repeated.
 
 from __future__ import annotations
 
+import os
 import re
 from collections import Counter, defaultdict
 from collections.abc import Callable
@@ -55,6 +56,7 @@ def inspect_scene(root: str | Path) -> SceneFacts:
         facts.add(".", "the scene must be a folder", "a file" if facts.root.exists() else "no such folder")
         return facts
     steps: list[tuple[str, Callable[[SceneFacts], None]]] = [
+        (".", check_links_stay_inside),
         ("scene.yaml", check_scene_yaml),
         ("frames/", check_frame_source),
         ("cameras.json", check_cameras_json),
@@ -76,6 +78,18 @@ def _relative(facts: SceneFacts, filename: str) -> str:
         return Path(filename).relative_to(facts.root).as_posix()
     except ValueError:
         return str(filename)
+
+
+def check_links_stay_inside(facts: SceneFacts) -> None:
+    """No symbolic link under the scene may lead out of it: the pipeline reads only the scene's own files
+    (a scene handed over must not make Glimpse read, and copy into a run, what lies elsewhere)."""
+    root = facts.root.resolve()
+    rule = "every file of a scene lies inside its folder: a symbolic link may not point outside it (copy the files in)"
+    for dirpath, dirnames, filenames in os.walk(facts.root):
+        for name in sorted(dirnames + filenames):
+            path = Path(dirpath) / name
+            if path.is_symlink() and not path.resolve().is_relative_to(root):
+                facts.add(path.relative_to(facts.root).as_posix(), rule, f"links to {os.readlink(path)}")
 
 
 # --- scene.yaml ---------------------------------------------------------------------------

@@ -1,10 +1,9 @@
 """The frames every later stage reads: chosen from frames/ or decoded from
 video.mp4, subsampled to a frame rate, undistorted, written to stage 01's
-``frames/`` (hard links when nothing changes)."""
+``frames/`` (copies, never links: editing a scene frame must not change a published output)."""
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
@@ -31,16 +30,9 @@ def select_frame_ids(frame_ids: list[int], scene_fps: float, fps: float | None, 
     return chosen if max_frames is None else chosen[:max_frames]
 
 
-def _link_or_copy(src: Path, dst: Path) -> None:
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copyfile(src, dst)
-
-
 def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, out_dir: Path) -> dict[int, Path]:
     """Materialise the chosen frames in ``out_dir`` as ``<id>.png`` (or the input's own
-    file, hard-linked, when it needs no undistortion). Returns frame id -> path."""
+    file, copied, when it needs no undistortion). Returns frame id -> path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     written: dict[int, Path] = {}
     if scene.video_path is not None:
@@ -56,7 +48,7 @@ def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, o
             write_png(path, undistorter.image(read_rgb(src)))
         else:
             path = out_dir / f"{frame_name(fid)}{src.suffix.lower()}"
-            _link_or_copy(src, path)
+            shutil.copyfile(src, path)  # the kernel may share the blocks (copy_file_range), never the file
         written[fid] = path
     return written
 
