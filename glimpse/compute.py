@@ -15,6 +15,8 @@ class ComputeConfig:
     device: Literal["auto", "cpu", "cuda"]
     threads: int  # CPU threads for torch, OpenMP and COLMAP; 0 = every core
     seed: int
+    frame_cache: int  # input frames (image and masks) stages 04 and 06 keep decoded, on the compute device
+    frame_read_ahead: int  # frames read ahead of the training loop on a background thread (< frame_cache)
 
 
 def resolved_threads(config: ComputeConfig) -> int:

@@ -112,9 +112,9 @@ def test_compute_device_resolves_to_cpu_here_and_refuses_a_missing_cuda():
 
     from glimpse.compute import ComputeConfig, resolve_device
 
-    assert resolve_device(ComputeConfig("cpu", 1, 0)) == torch.device("cpu")
+    assert resolve_device(ComputeConfig("cpu", 1, 0, 32, 4)) == torch.device("cpu")
     expected = "cuda" if torch.cuda.is_available() else "cpu"
-    assert resolve_device(ComputeConfig("auto", 1, 0)).type == expected
+    assert resolve_device(ComputeConfig("auto", 1, 0, 32, 4)).type == expected
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="compute.device is cuda"):
-            resolve_device(ComputeConfig("cuda", 1, 0))
+            resolve_device(ComputeConfig("cuda", 1, 0, 32, 4))

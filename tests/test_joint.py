@@ -317,6 +317,7 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
 def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
     """Train 24 iterations (densification and pruning included) with checkpoints every 10; a second trainer
     started from the same initial state resumes from the iteration-20 checkpoint and ends identical."""
+    from glimpse.io.frame_cache import FrameCache
     from glimpse.joint.train import JointTrainer, JointView
     from glimpse.render import Camera
 
@@ -325,7 +326,8 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
                       np.array([[0.0, 0.0, 3.0]]), 1.0, "free", np.zeros(1, bool))
     camera = Camera(torch.tensor([[40.0, 0, 23.5], [0, 40.0, 31.5], [0, 0, 1]]), torch.eye(3), torch.zeros(3), 48, 64)
     image = torch.as_tensor(np.random.default_rng(0).integers(0, 255, (64, 48, 3)), dtype=torch.uint8)
-    views = [JointView(0, camera, image, torch.ones(64, 48, dtype=torch.bool), None)]
+    pixels = FrameCache(lambda _: (image, torch.ones(64, 48, dtype=torch.bool), None), capacity=1)
+    views = [JointView(0, camera, pixels.get)]
 
     pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3), 48, 64)
     visibility = body_visibility(body_model, {"p0": body}, {0: pinhole}, 48, 64, {}, JOINT.visibility)

@@ -44,7 +44,7 @@ def test_seen_weights_are_each_gaussians_blending_weight_over_background_pixels(
                                       torch.rand(n, 3, generator=g), torch.full((n,), 0.2), 0.6, sh_degree=0)
     background = torch.zeros(24, 32, dtype=torch.bool)
     background[:, :20] = True
-    view = TrainingView(0, _camera(), torch.zeros(24, 32, 3, dtype=torch.uint8), background)
+    view = TrainingView(0, _camera(), lambda _: (torch.zeros(24, 32, 3, dtype=torch.uint8), background))
     weights = seen_weights(model, [view, view], RENDER)
     inputs = {k: v.detach() for k, v in model.render_inputs().items() if k not in ("sh", "sh_degree")}
     for i in range(n):
@@ -66,7 +66,8 @@ def test_backprojected_pixels_land_on_themselves_and_are_seen_where_the_backgrou
     first[:, :10] = True
     second = torch.zeros(24, 32, dtype=torch.bool)
     second[:, 20:] = True
-    views = [TrainingView(k, camera, torch.zeros(24, 32, 3, dtype=torch.uint8), bg) for k, bg in enumerate((first, second))]
+    pixels = {k: (torch.zeros(24, 32, 3, dtype=torch.uint8), bg) for k, bg in enumerate((first, second))}
+    views = [TrainingView(k, camera, pixels.__getitem__) for k in pixels]
     seen = SeenTest(views).seen(points).reshape(24, 32)
     assert len(SeenTest(views).cameras) == 1  # one camera: the two frames' masks are merged
     assert torch.equal(seen, first | second)
@@ -139,6 +140,7 @@ def test_moving_camera_starts_from_the_sfm_points(tmp_path):
 
 
 def test_a_killed_run_resumes_from_its_checkpoint_and_ends_as_an_uninterrupted_one(tmp_path):
+    """... and as one that keeps two frames in memory instead of every frame."""
     scene, run_dir = _upstream("demo", "tiny", tmp_path)
     twin = tmp_path / "twin"  # the same upstream outputs under a second root, for an uninterrupted run
     for stage in UPSTREAM:
@@ -158,8 +160,8 @@ def test_a_killed_run_resumes_from_its_checkpoint_and_ends_as_an_uninterrupted_o
     report = read_json(out / "report.json")
     assert report["resumed_from_iteration"] >= 50 and report["resumed_from_iteration"] % 50 == 0
     assert not checkpoint.exists()
-    again = run("04_bg_pretrain", scene, twin, params)
-    assert read_json(again / "report.json")["resumed_from_iteration"] == 0
+    again = run("04_bg_pretrain", scene, twin, params + " compute.frame_cache=2 compute.frame_read_ahead=1")
+    assert read_json(again / "report.json")["resumed_from_iteration"] == 0  # and its frames read two at a time
     assert (again / "background.ply").read_bytes() == (out / "background.ply").read_bytes()
 
 

@@ -54,19 +54,21 @@ class ViewResult:
 
 class SeenTest:
     """Whether world points are shown on a background pixel by some input view; views sharing one
-    camera are merged (their background masks or-ed)."""
+    camera are merged (their background masks or-ed). Masks are kept as bits (a moving camera keeps one
+    per frame: 1/8 of a bool mask, and the frames themselves are not held)."""
 
     def __init__(self, views: list[TrainingView]):
         self.cameras: list[Camera] = []
-        self.backgrounds: list[Tensor] = []
+        self.backgrounds: list[Tensor] = []  # per camera, [ceil(H * W / 8)] packed bits (pack_bits)
         for view in views:
-            for k, camera in enumerate(self.cameras):
-                if _same_camera(camera, view.camera):
-                    self.backgrounds[k] = self.backgrounds[k] | view.background
-                    break
+            background = view.background.reshape(-1)
+            same = [k for k, camera in enumerate(self.cameras) if _same_camera(camera, view.camera)]
+            if same:
+                merged = unpack_bits(self.backgrounds[same[0]], background.numel()) | background
+                self.backgrounds[same[0]] = pack_bits(merged)
             else:
                 self.cameras.append(view.camera)
-                self.backgrounds.append(view.background.clone())
+                self.backgrounds.append(pack_bits(background))
 
     def seen(self, points: Tensor) -> Tensor:
         """points [P, 3] world -> [P] bool."""
@@ -78,8 +80,26 @@ class SeenTest:
                 + camera.K[:2, 2]
             u, v = uv.round().long().unbind(-1)
             inside = (z > camera.near) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
-            seen[inside] |= background[v[inside], u[inside]]
+            seen[inside] |= bit_at(background, v[inside] * camera.width + u[inside])
         return seen
+
+
+def pack_bits(mask: Tensor) -> Tensor:
+    """[N] bool -> [ceil(N / 8)] uint8, eight pixels a byte, the first in the highest bit."""
+    padded = torch.zeros((mask.numel() + 7) // 8 * 8, dtype=torch.uint8, device=mask.device)
+    padded[:mask.numel()] = mask.to(torch.uint8)
+    weights = torch.tensor([128, 64, 32, 16, 8, 4, 2, 1], dtype=torch.uint8, device=mask.device)
+    return (padded.reshape(-1, 8) * weights).sum(1, dtype=torch.uint8)
+
+
+def unpack_bits(packed: Tensor, count: int) -> Tensor:
+    """The inverse of :func:`pack_bits`: [count] bool."""
+    return bit_at(packed, torch.arange(count, device=packed.device))
+
+
+def bit_at(packed: Tensor, index: Tensor) -> Tensor:
+    """Pixels ``index`` [P] long of a packed mask -> [P] bool."""
+    return ((packed[index >> 3] >> (7 - (index & 7)).to(torch.uint8)) & 1).bool()
 
 
 def _same_camera(a: Camera, b: Camera) -> bool:

@@ -21,6 +21,7 @@ from glimpse.gaussians.density import keep_only
 from glimpse.gaussians.model import GaussianModel, knn_scales
 from glimpse.gaussians.trainer import TrainingLog
 from glimpse.gaussians.training import scene_extent
+from glimpse.io.frame_cache import FrameCache, FrameCacheSize
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.io.ply_points import read_points_ply
 from glimpse.io.video import write_mp4
@@ -44,23 +45,27 @@ class BackgroundInputs:
     fps: float
 
 
-def load_views(inputs: BackgroundInputs, config: BackgroundConfig, device: torch.device) -> list[TrainingView]:
-    """Every frame with a camera; its background = not in stage 03's union mask grown by human_mask_dilate_px."""
-    frames = frame_files(inputs.frames_dir)
-    views = []
+def load_views(inputs: BackgroundInputs, config: BackgroundConfig, device: torch.device, frames: FrameCacheSize
+               ) -> tuple[list[TrainingView], FrameCache]:
+    """Every frame with a camera, and the cache its pixels are read through: the image, and its background =
+    not in stage 03's union mask grown by human_mask_dilate_px."""
+    files = frame_files(inputs.frames_dir)
+    unions = {fid: inputs.union_dir / f"{frame_name(fid)}.png" for fid in inputs.cameras}
     for fid in sorted(inputs.cameras):
-        union_path = inputs.union_dir / f"{frame_name(fid)}.png"
-        if fid not in frames or not union_path.is_file():
+        if fid not in files or not unions[fid].is_file():
             raise GlimpseError(f"04_bg_pretrain: frame {frame_name(fid)} has a camera but no "
-                               f"{'frame in ' + str(inputs.frames_dir) if fid not in frames else union_path}; "
+                               f"{'frame in ' + str(inputs.frames_dir) if fid not in files else unions[fid]}; "
                                f"rerun stages 01 and 03")
-        image = read_rgb(frames[fid])
-        people = disk(read_mask(union_path), config.human_mask_dilate_px)
-        views.append(TrainingView(fid, render_camera(inputs.cameras[fid], device),
-                                  torch.as_tensor(image, device=device), torch.as_tensor(~people, device=device)))
-    if not views:
+    if not inputs.cameras:
         raise GlimpseError("04_bg_pretrain: no frame has a camera (stage 01's cameras.json is empty)")
-    return views
+
+    def read(fid: int) -> tuple[torch.Tensor, torch.Tensor]:
+        people = disk(read_mask(unions[fid]), config.human_mask_dilate_px)
+        return torch.as_tensor(read_rgb(files[fid]), device=device), torch.as_tensor(~people, device=device)
+
+    cache = FrameCache(read, frames.frames)
+    views = [TrainingView(fid, render_camera(inputs.cameras[fid], device), cache.get) for fid in sorted(inputs.cameras)]
+    return views, cache
 
 
 def people_sphere(inputs: BackgroundInputs, radius_m: float) -> Sphere:
@@ -121,14 +126,16 @@ class BackgroundResult:
 
 
 def train_background(inputs: BackgroundInputs, config: BackgroundConfig, render: RenderConfig, seed: int,
-                     device: torch.device, work: Path, key: str, out: Path) -> BackgroundResult:
+                     device: torch.device, frames: FrameCacheSize, work: Path, key: str, out: Path
+                     ) -> BackgroundResult:
     """The whole stage: writes renders/ and never_seen/ under ``out``; returns the model and documents."""
-    views = load_views(inputs, config, device)
+    views, cache = load_views(inputs, config, device, frames)
     cloud, sphere, init_doc = initial_cloud(inputs, config, views)
     extent = scene_extent([v.camera for v in views], torch.as_tensor(cloud.points, dtype=torch.float32, device=device))
     model = initial_model(cloud, config, render.sh_degree, extent, device)
     init_doc = {"format": INIT_FORMAT, **init_doc, "extent": extent, "initial_gaussians": len(model)}
     trainer = BackgroundTrainer(model, views, config, render, sphere, seed, work / "checkpoint.pt", key)
+    trainer.read_ahead(cache.prefetch, frames.read_ahead)
     training = trainer.run()
     model = trainer.model
     seen = seen_weights(model, views, render) >= config.never_seen_min_weight
@@ -138,6 +145,7 @@ def train_background(inputs: BackgroundInputs, config: BackgroundConfig, render:
         keep_only(model, trainer.optimizer, seen)
         seen = seen[seen]
     report = _write_views(model, views, render, config, inputs.fps, out)
+    cache.close()
     report.update(_training_doc(training, config, len(model), int((~seen).sum()), pruned_unseen))
     return BackgroundResult(model, init_doc, report)
 

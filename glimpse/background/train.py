@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import torch
 from torch import Tensor
@@ -25,7 +26,7 @@ from glimpse.gaussians.model import GaussianModel
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
 from glimpse.gaussians.strategy import DefaultStrategy
 from glimpse.gaussians.trainer import GaussianTrainer
-from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background, view_order
+from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background
 from glimpse.metrics.losses import dssim_loss_on, l1_loss, mse_loss
 from glimpse.render import Camera, rasterize
 from glimpse.render.config import RenderConfig
@@ -33,12 +34,20 @@ from glimpse.render.config import RenderConfig
 
 @dataclass
 class TrainingView:
-    """One input frame: its camera, image [H, W, 3] uint8 and the pixels trained on, background [H, W] bool."""
+    """One input frame: its camera, and ``pixels(frame_id)`` -> its image [H, W, 3] uint8 and the pixels trained
+    on, background [H, W] bool (the stage's FrameCache: read from disk when needed, a bounded number kept)."""
 
     frame_id: int
     camera: Camera
-    image: Tensor
-    background: Tensor
+    pixels: Callable[[int], tuple[Tensor, Tensor]]
+
+    @property
+    def image(self) -> Tensor:
+        return self.pixels(self.frame_id)[0]
+
+    @property
+    def background(self) -> Tensor:
+        return self.pixels(self.frame_id)[1]
 
     def target(self) -> Tensor:
         return self.image.float() / 255.0
@@ -101,8 +110,7 @@ class BackgroundTrainer(GaussianTrainer):
     def _iteration(self) -> dict[str, float]:
         step, config = self.step + 1, self.config
         set_position_lr(self.optimizer, self.rates, self.extent, step)
-        epoch, slot = divmod(step - 1, len(self.views))
-        view = self.views[int(view_order(self.seed, epoch, len(self.views))[slot])]
+        view = self._view(self.views, self.seed, step)
         degree = min((step - 1) // config.scaled_sh_degree_every, self.render.sh_degree)
         out = rasterize(view.camera, **self.model.render_inputs(degree),
                         background=training_background(config.background_colour, self.seed, step, view.image.device),

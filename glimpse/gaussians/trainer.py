@@ -14,11 +14,14 @@ import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Sequence, TypeVar
 
 from tqdm import tqdm
 
+from glimpse.gaussians.training import view_for_step
 from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
+
+View = TypeVar("View")
 
 log = logging.getLogger("glimpse")
 LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the report
@@ -52,6 +55,20 @@ class GaussianTrainer(ABC):
         self.checkpoint, self.key = checkpoint, key
         self.log = TrainingLog()
         self.step = 0  # iterations done
+        self.prefetch: Callable[[list[int]], None] | None = None
+        self.frames_ahead = 0
+
+    def read_ahead(self, prefetch: Callable[[list[int]], None], frames: int) -> None:
+        """While an iteration runs, have ``prefetch`` (the stage's FrameCache) read the frames of the views
+        of the next ``frames`` iterations."""
+        self.prefetch, self.frames_ahead = prefetch, frames
+
+    def _view(self, views: Sequence[View], seed: int, step: int) -> View:
+        """The view iteration ``step`` trains on (``view_for_step``); starts reading the next ones' frames."""
+        if self.prefetch is not None and self.frames_ahead > 0:
+            last = min(step + self.frames_ahead, self.total_iterations)
+            self.prefetch([views[view_for_step(seed, s, len(views))].frame_id for s in range(step + 1, last + 1)])
+        return views[view_for_step(seed, step, len(views))]
 
     @abstractmethod
     def _iteration(self) -> dict[str, float]:

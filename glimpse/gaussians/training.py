@@ -44,3 +44,10 @@ def training_background(colour: BackgroundColour, seed: int, step: int, device: 
 def view_order(seed: int, epoch: int, count: int) -> np.ndarray:
     """[count] a permutation of the training views for ``epoch``."""
     return np.random.default_rng([seed, epoch, 1]).permutation(count)
+
+
+def view_for_step(seed: int, step: int, count: int) -> int:
+    """The index of the view iteration ``step`` (from 1) trains on: every view once per epoch, in
+    ``view_order``."""
+    epoch, slot = divmod(step - 1, count)
+    return int(view_order(seed, epoch, count)[slot])

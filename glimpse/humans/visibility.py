@@ -16,6 +16,8 @@ ones, and stage 07 uses it for the never-seen-region metrics.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -117,29 +119,31 @@ def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.nd
     return result
 
 
-def posed_vertices(body_model: BodyModel, params: BodyParams) -> np.ndarray:
-    """[T, V, 3] the body of every frame of ``params``, world frame."""
+def posed_vertices(body_model: BodyModel, params: BodyParams, rows: slice = slice(None)) -> np.ndarray:
+    """[T, V, 3] the body of the frames ``rows`` of ``params`` (default all), world frame."""
     with torch.no_grad():
-        out = body_model(torch.as_tensor(params.betas), torch.as_tensor(params.global_orient),
-                         torch.as_tensor(params.body_pose), torch.as_tensor(params.transl), scale=params.scale)
+        out = body_model(torch.as_tensor(params.betas), torch.as_tensor(params.global_orient[rows]),
+                         torch.as_tensor(params.body_pose[rows]), torch.as_tensor(params.transl[rows]),
+                         scale=params.scale)
     return out.vertices.double().numpy()
 
 
 def body_visibility(body_model: BodyModel, bodies: dict[str, BodyParams], cameras: dict[int, PinholeCamera],
-                    width: int, height: int, visible: dict[int, dict[str, np.ndarray]], config: VisibilityConfig
+                    width: int, height: int, visible: Mapping[int, dict[str, np.ndarray]], config: VisibilityConfig
                     ) -> dict[str, BodyVisibility]:
     """Every person's vertex visibility over the frames with a camera; ``visible[frame id][pid]`` [H, W] bool:
-    where that person is visible in that frame (stage 03's masks; no entry: no mask, geometry alone)."""
+    where that person is visible in that frame (stage 03's masks; no entry: no mask, geometry alone). ``visible``
+    may read each frame's masks when asked: frames are visited once, in order."""
     faces = body_model.faces.numpy()
     vertex_count = body_model.num_vertices
     records = {pid: BodyVisibility.empty(vertex_count) for pid in bodies}
-    posed = {pid: (posed_vertices(body_model, params), {int(f): r for r, f in enumerate(params.frame_ids)})
-             for pid, params in bodies.items()}
-    for fid in sorted(cameras):
-        present = [pid for pid in sorted(bodies) if fid in posed[pid][1]]
-        seen = frame_visibility([posed[pid][0][posed[pid][1][fid]] for pid in present],
-                                [float(bodies[pid].scale) for pid in present], faces, cameras[fid], width, height,
-                                [visible.get(fid, {}).get(pid) for pid in present], config)
+    rows = {pid: {int(f): r for r, f in enumerate(params.frame_ids)} for pid, params in bodies.items()}
+    for fid in sorted(cameras):  # one frame at a time: a long video's bodies and masks are never all held
+        present = [pid for pid in sorted(bodies) if fid in rows[pid]]
+        posed = [posed_vertices(body_model, bodies[pid], slice(rows[pid][fid], rows[pid][fid] + 1))[0]
+                 for pid in present]
+        seen = frame_visibility(posed, [float(bodies[pid].scale) for pid in present], faces, cameras[fid], width,
+                                height, [visible.get(fid, {}).get(pid) for pid in present], config)
         for pid, (mask, cosine, px_per_m) in zip(present, seen):
             records[pid].add(mask, cosine, px_per_m)
     return records

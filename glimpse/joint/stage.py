@@ -5,6 +5,7 @@ renders and the report. The stage's run.py only parses, loads and writes what th
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,10 +22,11 @@ from glimpse.gaussians.trainer import TrainingLog
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians, initial_person
 from glimpse.humans.visibility import BodyVisibility, body_visibility
+from glimpse.io.frame_cache import FrameCache, FrameCacheSize
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb
 from glimpse.io.video import write_mp4
 from glimpse.joint.config import JointConfig
-from glimpse.joint.train import JointTrainer, JointView, people_box
+from glimpse.joint.train import Box, JointTrainer, JointView, people_box
 from glimpse.metrics.image import psnr
 from glimpse.metrics.lpips import LPIPS
 from glimpse.prior import PriorContext, make_prior
@@ -65,37 +67,52 @@ def static_occlusion(union: np.ndarray, occluders: list[np.ndarray]) -> np.ndarr
     return hidden & ~union
 
 
-def load_views(inputs: JointInputs, config: JointConfig, device: torch.device) -> list[JointView]:
-    """Every frame with a camera; the losses skip pixels a static occluder hides (docs/joint.md)."""
-    frames = frame_files(inputs.frames_dir)
-    views = []
+def load_views(inputs: JointInputs, config: JointConfig, device: torch.device, frames: FrameCacheSize
+               ) -> tuple[list[JointView], FrameCache]:
+    """Every frame with a camera, and the cache its pixels are read through; the losses skip pixels a static
+    occluder hides (docs/joint.md)."""
+    files = frame_files(inputs.frames_dir)
     for fid in sorted(inputs.cameras):
-        name = frame_name(fid)
-        union_path = inputs.masks_dir / "union" / f"{name}.png"
-        if fid not in frames or not union_path.is_file():
-            raise GlimpseError(f"06_joint_opt: frame {name} has a camera but no "
-                               f"{'frame in ' + str(inputs.frames_dir) if fid not in frames else union_path}; "
+        union_path = inputs.masks_dir / "union" / f"{frame_name(fid)}.png"
+        if fid not in files or not union_path.is_file():
+            raise GlimpseError(f"06_joint_opt: frame {frame_name(fid)} has a camera but no "
+                               f"{'frame in ' + str(inputs.frames_dir) if fid not in files else union_path}; "
                                f"rerun stages 01 and 03")
-        union = read_mask(union_path)
+    if not inputs.cameras:
+        raise GlimpseError("06_joint_opt: no frame has a camera (stage 01's cameras.json is empty)")
+
+    def read(fid: int) -> tuple[torch.Tensor, torch.Tensor, Box | None]:
+        name = frame_name(fid)
+        union = read_mask(inputs.masks_dir / "union" / f"{name}.png")
         occluders = [read_mask(path) for pid in inputs.bodies
                      if (path := inputs.occluders_dir / pid / f"{name}.png").is_file()]
         keep = ~static_occlusion(union, occluders)
         box = people_box(union, config.loss.lpips_margin_px, config.loss.lpips_min_px)
-        views.append(JointView(fid, render_camera(inputs.cameras[fid], device),
-                               torch.as_tensor(read_rgb(frames[fid]), device=device),
-                               torch.as_tensor(keep, device=device), box))
-    if not views:
-        raise GlimpseError("06_joint_opt: no frame has a camera (stage 01's cameras.json is empty)")
-    return views
+        return torch.as_tensor(read_rgb(files[fid]), device=device), torch.as_tensor(keep, device=device), box
+
+    cache = FrameCache(read, frames.frames)
+    views = [JointView(fid, render_camera(inputs.cameras[fid], device), cache.get) for fid in sorted(inputs.cameras)]
+    return views, cache
 
 
-def person_masks(inputs: JointInputs, pids: list[str]) -> dict[int, dict[str, np.ndarray]]:
-    """Per frame with a camera, per person with a mask file there: stage 03's visible mask [H, W] bool."""
-    masks: dict[int, dict[str, np.ndarray]] = {}
-    for fid in sorted(inputs.cameras):
-        paths = {pid: inputs.masks_dir / pid / f"{frame_name(fid)}.png" for pid in pids}
-        masks[fid] = {pid: read_mask(path) for pid, path in paths.items() if path.is_file()}
-    return masks
+class PersonMasks(Mapping[int, dict[str, np.ndarray]]):
+    """frame id (with a camera) -> person -> stage 03's visible mask [H, W] bool, for the people with a mask
+    file there; read when asked, never held (a long video's masks need no memory)."""
+
+    def __init__(self, inputs: JointInputs, pids: list[str]):
+        self.inputs, self.pids = inputs, pids
+
+    def __getitem__(self, fid: int) -> dict[str, np.ndarray]:
+        if fid not in self.inputs.cameras:
+            raise KeyError(fid)
+        paths = {pid: self.inputs.masks_dir / pid / f"{frame_name(fid)}.png" for pid in self.pids}
+        return {pid: read_mask(path) for pid, path in paths.items() if path.is_file()}
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(sorted(self.inputs.cameras))
+
+    def __len__(self) -> int:
+        return len(self.inputs.cameras)
 
 
 def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, body_model: BodyModel,
@@ -114,15 +131,16 @@ def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, b
 
 def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, body: BodyConfig,
                 body_model: BodyModel, prior_kind: str, prior_config: object | None, seed: int, device: torch.device,
-                work: Path, key: str, out: Path, identity_dir: Path | None = None) -> JointResult:
+                frames: FrameCacheSize, work: Path, key: str, out: Path, identity_dir: Path | None = None
+                ) -> JointResult:
     """Train with the prior ``prior_kind`` (built with ``prior_config``, its section's typed config; ``identity_dir``
     stage 05's outputs), then render every input view (``out/renders/joint.mp4``) and build the report; the sds
     prior writes its previews, when asked, to ``out/sds_previews/``."""
     torch.manual_seed(seed)
-    views = load_views(inputs, config, device)
+    views, cache = load_views(inputs, config, device, frames)
     people = initial_people(inputs, config, body, body_model, render.sh_degree, device)
     visibility = body_visibility(body_model, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
-                                 inputs.height, person_masks(inputs, [p.pid for p in people]), config.visibility)
+                                 inputs.height, PersonMasks(inputs, [p.pid for p in people]), config.visibility)
     prior = make_prior(prior_kind, PriorContext(people, visibility, body_model, render, seed, config.scaled,
                                                 identity_dir, out / PREVIEWS_DIR), prior_config)
     initial_counts = {p.pid: len(p.model) for p in people}
@@ -130,8 +148,10 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     lpips_module = LPIPS(config.loss.lpips_net).to(device) if config.loss.lpips > 0 else None
     trainer = JointTrainer(background, people, views, config, render, prior, lpips_module, seed,
                            work / "checkpoint.pt", key)
+    trainer.read_ahead(cache.prefetch, frames.read_ahead)
     training = trainer.run()
     frames_doc = _write_views(trainer, views, config, inputs, out)
+    cache.close()
     report = _report(training, config, people, initial_counts, frames_doc, prior.name)
     for person in people:
         report["people"][person.pid]["body_vertices_seen"] = round(float(visibility[person.pid].seen.mean()), 4)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -31,7 +32,7 @@ from torch import Tensor
 from glimpse.gaussians.model import GaussianModel, logit
 from glimpse.gaussians.optim import make_optimizer, set_position_lr
 from glimpse.gaussians.trainer import GaussianTrainer
-from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background, view_order
+from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_background
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.config import JointConfig
@@ -45,23 +46,37 @@ HUMAN_EXTENT = 1.0  # canonical frame: human learning rates are in metres of bod
 PERSON_SEED_STRIDE = 101  # person k's densification at iteration i draws from seed * SEED_STRIDE + i * stride + k
 
 
+Box = tuple[int, int, int, int]
+
+
 @dataclass
 class JointView:
-    """One input frame: camera, image [H, W, 3] uint8, the pixels the losses use ``keep [H, W]`` bool,
-    and the LPIPS box ``(y0, y1, x0, x1)`` around its people (None: nobody visible)."""
+    """One input frame: camera, and ``pixels(frame_id)`` -> its image [H, W, 3] uint8, the pixels the losses
+    use ``keep [H, W]`` bool and the LPIPS box ``(y0, y1, x0, x1)`` around its people (None: nobody visible);
+    ``pixels`` is the stage's FrameCache (read from disk when needed, a bounded number kept)."""
 
     frame_id: int
     camera: Camera
-    image: Tensor
-    keep: Tensor
-    people_box: tuple[int, int, int, int] | None
+    pixels: Callable[[int], tuple[Tensor, Tensor, Box | None]]
+
+    @property
+    def image(self) -> Tensor:
+        return self.pixels(self.frame_id)[0]
+
+    @property
+    def keep(self) -> Tensor:
+        return self.pixels(self.frame_id)[1]
+
+    @property
+    def people_box(self) -> Box | None:
+        return self.pixels(self.frame_id)[2]
 
     def target(self) -> Tensor:
         return self.image.float() / 255.0
 
 
 def reconstruction_terms(config: JointConfig, lpips_module: LPIPS | None, rendered: Tensor, target: Tensor,
-                         keep: Tensor, box: tuple[int, int, int, int] | None) -> dict[str, Tensor]:
+                         keep: Tensor, box: Box | None) -> dict[str, Tensor]:
     """Unweighted MSE, D-SSIM and (inside ``box``) LPIPS of ``rendered`` vs ``target`` [H, W, 3] over ``keep``."""
     terms = {"mse": mse_loss(rendered, target, keep), "dssim": dssim_loss_on(rendered, target, keep)}
     if config.loss.lpips > 0 and lpips_module is not None and box is not None:
@@ -143,8 +158,7 @@ class JointTrainer(GaussianTrainer):
         set_position_lr(self.background_optimizer, self.background_rates, self.extent, step)
         for optimizer in self.person_optimizers:
             set_position_lr(optimizer, self.human_rates, HUMAN_EXTENT, step)
-        epoch, slot = divmod(step - 1, len(self.views))
-        view = self.views[int(view_order(self.seed, epoch, len(self.views))[slot])]
+        view = self._view(self.views, self.seed, step)
         human_degree = config.human_sh_degree(step, self.render.sh_degree)
         gaussians = frame_gaussians(view.camera, view.frame_id, self.people, human_degree, self.background,
                                     self.background_degree)
@@ -219,7 +233,7 @@ class JointTrainer(GaussianTrainer):
                 self.prior.gaussians_changed(person)
 
 
-def people_box(union: np.ndarray, margin_px: int, min_px: int) -> tuple[int, int, int, int] | None:
+def people_box(union: np.ndarray, margin_px: int, min_px: int) -> Box | None:
     """(y0, y1, x0, x1): the box around the True pixels of ``union [H, W]``, grown by ``margin_px`` and to at
     least ``min_px`` a side (within the image); None when nothing is set."""
     ys, xs = np.nonzero(union)

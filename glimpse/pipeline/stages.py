@@ -91,8 +91,10 @@ STAGES: tuple[StageSpec, ...] = (
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # Parameters that decide how a stage runs, not what it produces (dotted; the section may be a pattern):
 # kept out of the .params stamps, so changing them reruns nothing. Threads change at most float rounding
-# (and COLMAP's results when 01_sfm.deterministic is false); checkpoints only where a run may resume.
-NOT_RESULT_KEYS: tuple[str, ...] = ("compute.threads", "*.checkpoint_every")
+# (and COLMAP's results when 01_sfm.deterministic is false); checkpoints only where a run may resume; the frame
+# cache only what is kept in memory.
+NOT_RESULT_KEYS: tuple[str, ...] = ("compute.threads", "compute.frame_cache", "compute.frame_read_ahead",
+                                     "*.checkpoint_every")
 # The shared sections of pipeline.yaml (patterns): every other section is one stage's own.
 SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_*", "diffusion")
 

@@ -24,6 +24,7 @@ from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.gaussians.ply import GAUSSIANS_FORMAT, write_gaussians_ply  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.io.checkpoint import fingerprint  # noqa: E402
+from glimpse.io.frame_cache import FrameCacheSize  # noqa: E402
 from glimpse.io.json_file import write_json  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
@@ -46,7 +47,9 @@ def run(ctx: StageContext) -> None:
                               scene.fps)
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in (sfm, fits, masks)])
     with ctx.timed("train"):
-        result = train_background(inputs, config, render, compute.seed, resolve_device(compute), ctx.work, key, ctx.out)
+        frames = FrameCacheSize(compute.frame_cache, compute.frame_read_ahead)
+        result = train_background(inputs, config, render, compute.seed, resolve_device(compute), frames, ctx.work, key,
+                                  ctx.out)
     write_gaussians_ply(ctx.out / "background.ply", result.model.to_splats(),
                         {"sh_degree": str(result.model.sh_degree), "stage": STAGE})
     write_json(ctx.out / "init.json", result.init_doc)

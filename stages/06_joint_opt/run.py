@@ -35,6 +35,7 @@ from glimpse.gaussians.ply import GAUSSIANS_FORMAT, read_gaussians_ply, write_ga
 from glimpse.humans.visibility import VISIBILITY_FORMAT  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.io.checkpoint import fingerprint  # noqa: E402
+from glimpse.io.frame_cache import FrameCacheSize  # noqa: E402
 from glimpse.io.json_file import write_json  # noqa: E402
 from glimpse.joint.stage import JointInputs, train_joint  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
@@ -66,7 +67,8 @@ def run(ctx: StageContext) -> None:
     with ctx.timed("train"):
         result = train_joint(inputs, config, render, body, body_model, prior_kind,
                              ctx.section(section) if section else None, compute.seed, device,
-                             ctx.work, key, ctx.out, dirs["05_textual_inversion"])
+                             FrameCacheSize(compute.frame_cache, compute.frame_read_ahead), ctx.work, key, ctx.out,
+                             dirs["05_textual_inversion"])
     for person in result.people:
         folder = ctx.out / "humans" / person.pid
         folder.mkdir(parents=True, exist_ok=True)
