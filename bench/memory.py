@@ -1,15 +1,16 @@
 """Peak memory of stages 04 and 06 against the number of input frames: flat with the frame cache.
 
-The demo fixture at 480x360 (30 frames) goes through stages 01-04 once; its outputs are then
-repeated (ping-pong over the 30 frames: frames, cameras, bodies, masks) into runs of 100, 500 and
-2,000 frames, and each stage's own code (train_background, train_joint: training on a short
+The demo fixture (--size: small, 128x96 and 24 frames, by default; medium is 480x360 and 30
+frames) goes through stages 01-04 once; its outputs are then repeated (ping-pong over its frames:
+frames, cameras, bodies, masks) into runs of 100, 500 and 2,000 frames, and each stage's own code (train_background, train_joint: training on a short
 schedule, then rendering and scoring every input view) runs on them in a fresh process whose peak
 resident memory is read from the kernel (wait4). Each stage runs twice per length: with the default
 `compute.frame_cache` and, as the baseline measured in the same run, with a cache as large as the
 video (every frame held, as before the cache). The stages run on the CPU here; on a GPU the frames
 held live in GPU memory instead, the same count.
 
-    .venv/bin/python bench/memory.py [--frames 100 500 2000] [--stages 04 06]
+    .venv/bin/python bench/memory.py [--size small|medium] [--frames 100 500 2000] [--stages 04 06]
+                                     [--baseline-up-to FRAMES]
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ def repeat_run(run_dir: Path, count: int, target: Path) -> None:
     width, height, cameras = read_cameras_json(run_dir / "01_sfm" / "cameras.json")
     ids = sorted(cameras)
     order = ping_pong(count, len(ids))
+    (target / "01_sfm").mkdir(parents=True, exist_ok=True)
     write_cameras_json(target / "01_sfm" / "cameras.json", width, height,
                        {new: cameras[ids[old]] for new, old in enumerate(order)})
     masks = run_dir / "03_masks"
@@ -135,6 +137,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, nargs="+", default=[100, 500, 2000])
     parser.add_argument("--stages", nargs="+", default=["04", "06"], choices=["04", "06"])
+    parser.add_argument("--size", default="small", choices=["small", "medium"])
+    parser.add_argument("--baseline-up-to", type=int, default=None,
+                        help="measure the every-frame-held baseline only up to this many frames (it is slow)")
     parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -146,21 +151,25 @@ def main() -> None:
     default_cache = int(load_pipeline_yaml()["compute"]["frame_cache"])
     with tempfile.TemporaryDirectory(prefix="glimpse-bench-memory-") as tmp:
         root = Path(tmp)
-        scene = make_scene("demo", root / "scene", "medium", seed=SEED)
+        scene = make_scene("demo", root / "scene", args.size, seed=SEED)
         for stage in UPSTREAM:
             run(stage, scene, root / "out", PARAMS)
-        source = root / "out" / "demo_medium"
+        source = root / "out" / f"demo_{args.size}"
+        width, height, _ = read_cameras_json(source / "01_sfm" / "cameras.json")
         rows = []
         for count in args.frames:
             long_run = root / f"run_{count}"
             repeat_run(source, count, long_run)
             for stage in args.stages:
-                for label, cache in (("every frame held", count), (f"frame_cache {default_cache}", default_cache)):
+                variants = [(f"frame_cache {default_cache}", default_cache)]
+                if args.baseline_up_to is None or count <= args.baseline_up_to:
+                    variants.insert(0, ("every frame held", count))
+                for label, cache in variants:
                     peak, seconds = measure(stage, long_run, cache, root / f"out_{stage}_{count}_{cache}")
                     rows.append((stage, count, label, peak, seconds))
                     print(json.dumps({"stage": stage, "frames": count, "cache": label, "peak_mb": round(peak),
                                       "seconds": round(seconds, 1)}), file=sys.stderr, flush=True)
-    print("| stage | frames (480x360) | frames held | peak memory, MB | vs 100 frames | s |")
+    print(f"| stage | frames ({width}x{height}) | frames held | peak memory, MB | vs {args.frames[0]} frames | s |")
     print("|---|---|---|---|---|---|")
     first = {(stage, label): peak for stage, count, label, peak, _ in rows if count == args.frames[0]}
     for stage, count, label, peak, seconds in rows:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import errno
 import fcntl
 import json
-import logging
 import os
 import socket
 import sys
@@ -27,7 +26,6 @@ from typing import Iterator
 
 from glimpse.errors import GlimpseError
 
-log = logging.getLogger("glimpse")
 # Seconds between two tries while waiting for a lock.
 POLL_S = 0.2
 
@@ -61,11 +59,11 @@ def read_holder(lock_file: Path) -> Holder | None:
 def _inherited(lock_file: Path, env_var: str) -> int | None:
     """The descriptor of ``lock_file``'s lock when an ancestor handed it to this process (named in
     ``env_var``), else None."""
-    fd_text, _, path = os.environ.get(env_var, "").partition(":")
-    if not fd_text.isdigit() or path != str(lock_file.absolute()):
+    fd_text = os.environ.get(env_var, "").partition(":")[0]
+    if not fd_text.isdigit():
         return None
     fd = int(fd_text)
-    try:
+    try:  # the same file, however its path was spelt
         if not os.path.samestat(os.fstat(fd), os.stat(lock_file)):
             return None
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # shares the ancestor's open file: already ours

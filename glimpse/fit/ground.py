@@ -22,6 +22,12 @@ import numpy as np
 SOLE_LANDMARKS = ("left_heel", "left_big_toe", "right_heel", "right_big_toe")  # the sole points a foot stands on
 
 
+def height_above_plane(points, normal, camera_centre, camera_height: float):
+    """[..., 3] world points -> [...] signed height above the plane ``normal . (x - camera_centre) =
+    -camera_height`` (numpy arrays or torch tensors alike; world units)."""
+    return (points - camera_centre) @ normal + camera_height
+
+
 @dataclass(frozen=True)
 class Floor:
     """The plane ``normal . (x - camera_centre) = -camera_height``: normal [3] unit (up), camera_centre [3]
@@ -33,7 +39,7 @@ class Floor:
 
     def height_of(self, points: np.ndarray) -> np.ndarray:
         """[..., 3] world points -> [...] signed height above the floor (world units)."""
-        return (points - self.camera_centre) @ self.normal + self.camera_height
+        return height_above_plane(points, self.normal, self.camera_centre, self.camera_height)
 
 
 def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray, camera_centre: np.ndarray,

@@ -25,6 +25,7 @@ import torch
 from torch import Tensor
 
 from glimpse.fit.config import FitWeights
+from glimpse.fit.ground import height_above_plane
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.priors import JointLimits, PosePrior, shape_energy
 
@@ -135,7 +136,7 @@ class FloorContact:
 
     def energy(self, soles: Tensor, times_s: Tensor, frame_ids: Tensor, max_gap_frames: int) -> Tensor:
         """soles [T, S, 3] world points (metres: the floor term is used in metric frames only)."""
-        height = (soles - self.camera_centre) @ self.normal + self.camera_height  # [T, S]
+        height = height_above_plane(soles, self.normal, self.camera_centre, self.camera_height)  # [T, S]
         on_floor = (self.contact * height.square()).sum()
         below = height.clamp(max=0.0).square().sum()
         energy = (on_floor + below) / self.sigma_m**2
