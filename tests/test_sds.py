@@ -224,7 +224,7 @@ def test_the_denoised_guess_inverts_the_forward_diffusion(models, text):
                     500, torch.Generator().manual_seed(0), SDS)[1].preview is None  # no decoding unless asked
 
 
-def test_a_nan_prediction_gives_a_zero_gradient(models, text, monkeypatch):
+def test_a_nan_prediction_gives_a_zero_gradient_and_is_counted(models, text, monkeypatch):
     import glimpse.prior.sds.guidance as guidance
 
     monkeypatch.setattr(guidance, "predicted_noise", lambda *args: torch.full((1, 4, 8, 8), float("nan")))
@@ -233,6 +233,7 @@ def test_a_nan_prediction_gives_a_zero_gradient(models, text, monkeypatch):
                           torch.Generator().manual_seed(0), SDS)
     loss.backward()
     assert loss.item() == 0.0 and info.grad_norm == 0.0 and (rgb.grad == 0).all()
+    assert info.nonfinite == 4 * 8 * 8  # zeroed, and counted: the prior reports it
 
 
 def _gaussians(seed: int, offset: float) -> GaussianModel:

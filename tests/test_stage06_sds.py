@@ -35,6 +35,7 @@ def test_stages_05_and_06_run_with_the_sds_prior(tmp_path):
     history = {entry["iteration"]: entry for entry in report["loss_history"]}
     people = sorted(report["people"])
     assert len(people) >= 1
+    assert report["prior_guidance_nonfinite_steps"] == {pid: 0 for pid in people}  # tiny fp32 models: finite
     for iteration, entry in history.items():
         assert ("loss_sds_separate" in entry) == (iteration >= start), iteration
         if iteration >= start:  # lambda_recon = 1e6 tau_max^2 weighs the reconstruction from start_at

@@ -153,6 +153,7 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     frames_doc = _write_views(trainer, views, config, inputs, out)
     cache.close()
     report = _report(training, config, people, initial_counts, frames_doc, prior.name)
+    report.update({f"prior_{key}": value for key, value in prior.report().items()})
     for person in people:
         report["people"][person.pid]["body_vertices_seen"] = round(float(visibility[person.pid].seen.mean()), 4)
     return JointResult(background, people, visibility, report)

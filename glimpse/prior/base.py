@@ -70,6 +70,10 @@ class UnseenPrior(ABC):
     def gaussians_changed(self, person: PersonGaussians) -> None:
         """``person``'s Gaussians were densified or pruned: rows cached per Gaussian are stale."""
 
+    def report(self) -> dict:
+        """Facts for stage 06's report (JSON-ready; empty by default)."""
+        return {}
+
     def state_dict(self) -> dict:
         return {}
 

@@ -24,7 +24,8 @@ def rasterize_gsplat(camera: Camera, means: Tensor, covariances: Tensor, opaciti
     try:
         from gsplat import rasterization
     except ImportError:
-        raise GlimpseError("render.backend=gsplat needs gsplat (pip install 'glimpse[cuda]' on a CUDA machine)") from None
+        raise GlimpseError("render.backend=gsplat needs gsplat: on a CUDA machine, from this checkout, "
+                           ".venv/bin/pip install -e '.[cuda]' (the cuda extra of pyproject.toml)") from None
     device = means.device
     K = camera.K.to(device=device, dtype=means.dtype).clone()
     K[0, 2] += GSPLAT_PIXEL_OFFSET

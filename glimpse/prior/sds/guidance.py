@@ -124,11 +124,14 @@ def predicted_noise(models: DiffusionModels, noisy: Tensor, timestep: int, skele
 
 @dataclass
 class SDSInfo:
-    """What one SDS step saw: the norm of its latent gradient and, when asked, the one-step denoised guess
-    decoded to RGB ``preview [B, 3, S, S]`` in 0..1 (what the guidance pulls the render towards)."""
+    """What one SDS step saw: the norm of its latent gradient, how many of its values were not finite (NaN
+    or inf guidance, set to 0: those latents get no gradient; the prior reports them), and, when asked, the
+    one-step denoised guess decoded to RGB ``preview [B, 3, S, S]`` in 0..1 (what the guidance pulls the
+    render towards)."""
 
     grad_norm: float
     preview: Tensor | None = None
+    nonfinite: int = 0
 
 
 def denoised_latents(models: DiffusionModels, noisy: Tensor, predicted: Tensor, timestep: int) -> Tensor:
@@ -158,8 +161,10 @@ def sds_loss(models: DiffusionModels, rgb: Tensor, skeleton: Tensor, text: SDSTe
     with torch.no_grad():
         noisy = add_noise(models, latents, noise, timestep)
         guided = predicted_noise(models, noisy, timestep, skeleton, text, config)
-        grad = torch.nan_to_num((1.0 - alpha_bar) * (guided - noise), nan=0.0, posinf=0.0, neginf=0.0)
+        grad = (1.0 - alpha_bar) * (guided - noise)
+        nonfinite = int((~torch.isfinite(grad)).sum())
+        grad = torch.nan_to_num(grad, nan=0.0, posinf=0.0, neginf=0.0)
         target = latents - grad
         guess = decode_latents(models, denoised_latents(models, noisy, guided, timestep)) if preview else None
     loss = 0.5 * (latents.float() - target.float()).square().sum() / latents.shape[0]
-    return loss, SDSInfo(float(grad.float().norm()), guess)
+    return loss, SDSInfo(float(grad.float().norm()), guess, nonfinite)

@@ -24,6 +24,8 @@ Everything random is drawn from (seed, iteration, person), so a resumed run repe
 
 from __future__ import annotations
 
+import logging
+
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -44,7 +46,7 @@ from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.sds.cameras import sample_view, view_kind
 from glimpse.prior.sds.config import DiffusionConfig
 from glimpse.prior.sds.control import skeleton_image
-from glimpse.prior.sds.guidance import SDSConfig, SDSText, encode_view_text, sds_loss
+from glimpse.prior.sds.guidance import SDSConfig, SDSInfo, SDSText, encode_view_text, sds_loss
 from glimpse.prior.sds.identity import IdentitySwitch, load_identity
 from glimpse.prior.sds.load import load_diffusion
 from glimpse.prior.sds.person_identity import IDENTITY_FILE, unit_image
@@ -56,6 +58,9 @@ from glimpse.render import rasterize
 
 PELVIS = 0
 STEP_SEED_STRIDE = 1_000_003  # (seed, iteration, person) -> one random stream
+
+
+log = logging.getLogger("glimpse")
 
 
 def posed_body(person: PersonGaussians, transforms: Tensor, skin_weights: Tensor) -> tuple[np.ndarray, np.ndarray]:
@@ -99,6 +104,30 @@ class SDSPrior(UnseenPrior):
         self.skin_weights = context.body_model.weights.to(self.device, torch.float32)
         self.labels = context.body_model.weights.argmax(dim=1).cpu().numpy()
         self.texts: dict[tuple[str, str, str], SDSText] = {}
+        self.nonfinite_steps = {person.pid: 0 for person in self.people}  # SDS steps with NaN/inf guidance
+
+    # --- what it reports and what a checkpoint keeps ------------------------------------------------
+
+    def report(self) -> dict:
+        return {"guidance_nonfinite_steps": dict(self.nonfinite_steps)}
+
+    def state_dict(self) -> dict:
+        return {"nonfinite_steps": dict(self.nonfinite_steps)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.nonfinite_steps.update({pid: int(n) for pid, n in state.get("nonfinite_steps", {}).items()})
+
+    def _count_nonfinite(self, pid: str, step: int, info: SDSInfo) -> None:
+        """Guidance that is not finite gives those latents no gradient (SDSInfo): count it, and say so the
+        first time for each person (in fp16 it means an overflow: diffusion.half_precision false avoids it)."""
+        if info.nonfinite == 0:
+            return
+        if self.nonfinite_steps[pid] == 0:
+            log.warning("sds prior: the diffusion guidance for %s at iteration %d had %d values that are not "
+                        "finite (no gradient there); counted in the report as guidance_nonfinite_steps%s", pid,
+                        step, info.nonfinite, " (fp16: try diffusion.half_precision false)"
+                        if self.models.unet.dtype == torch.float16 else "")
+        self.nonfinite_steps[pid] += 1
 
     # --- schedules ---------------------------------------------------------------------------------
 
@@ -153,6 +182,7 @@ class SDSPrior(UnseenPrior):
         loss, info = sds_loss(self.models, rgb, skeleton, self._text(person.pid, prompt_view, kind), timestep,
                               generator, SDSConfig(config.guidance_scale, config.controlnet_scale,
                                                    config.resolution_px), preview)
+        self._count_nonfinite(person.pid, step, info)
         if info.preview is not None:
             self._write_preview(self.preview_dir / person.pid / f"{step:06d}.png", rgb, skeleton, info.preview)
         return loss, hard_surface_loss(render.alpha)
