@@ -131,12 +131,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "run":
         return _run(args)
     if args.command == "clean-stage":
-        from glimpse.pipeline.stages import stage_spec
+        from glimpse.pipeline.stages import named_stage
 
-        try:
-            stage_spec(args.stage)
-        except ValueError as exc:
-            raise GlimpseError(str(exc)) from None
+        named_stage(args.stage)
         run = locate_run(args.scene, args.out)
         with run_lock(run, f"clean-stage {args.stage}"):
             for folder in (run.stage_dir(args.stage), run.work_dir(args.stage)):
@@ -164,12 +161,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(locate_run(args.scene, args.out).root)
         return 0
     if args.command == "params":
-        from glimpse.pipeline.stages import stage_spec
+        from glimpse.pipeline.stages import named_stage
 
-        try:
-            stage_spec(args.stage)
-        except ValueError as exc:
-            raise GlimpseError(str(exc)) from None
+        named_stage(args.stage)
     whole = getattr(args, "whole_pipeline", False)
     with run_lock(locate_run(args.scene, args.out, whole, args.params), f"glimpse {args.command}"):
         run, _ = prepare_run(args.scene, args.out, args.params, whole)

@@ -61,14 +61,13 @@ class SeenTest:
         self.cameras: list[Camera] = []
         self.backgrounds: list[Tensor] = []  # per camera, [ceil(H * W / 8)] packed bits (pack_bits)
         for view in views:
-            background = view.background.reshape(-1)
-            same = [k for k, camera in enumerate(self.cameras) if _same_camera(camera, view.camera)]
-            if same:
-                merged = unpack_bits(self.backgrounds[same[0]], background.numel()) | background
-                self.backgrounds[same[0]] = pack_bits(merged)
+            packed = pack_bits(view.background.reshape(-1))
+            same = next((k for k, camera in enumerate(self.cameras) if _same_camera(camera, view.camera)), None)
+            if same is not None:
+                self.backgrounds[same] = self.backgrounds[same] | packed  # or-ing bytes ors their pixels
             else:
                 self.cameras.append(view.camera)
-                self.backgrounds.append(pack_bits(background))
+                self.backgrounds.append(packed)
 
     def seen(self, points: Tensor) -> Tensor:
         """points [P, 3] world -> [P] bool."""
@@ -90,11 +89,6 @@ def pack_bits(mask: Tensor) -> Tensor:
     padded[:mask.numel()] = mask.to(torch.uint8)
     weights = torch.tensor([128, 64, 32, 16, 8, 4, 2, 1], dtype=torch.uint8, device=mask.device)
     return (padded.reshape(-1, 8) * weights).sum(1, dtype=torch.uint8)
-
-
-def unpack_bits(packed: Tensor, count: int) -> Tensor:
-    """The inverse of :func:`pack_bits`: [count] bool."""
-    return bit_at(packed, torch.arange(count, device=packed.device))
 
 
 def bit_at(packed: Tensor, index: Tensor) -> Tensor:

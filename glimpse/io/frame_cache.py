@@ -46,7 +46,6 @@ class FrameCache(Generic[Item]):
         self.pending: dict[int, Future] = {}
         self.lock = threading.Lock()
         self.reader: ThreadPoolExecutor | None = None
-        self.reads = 0
 
     def get(self, frame_id: int) -> Item:
         with self.lock:
@@ -54,7 +53,7 @@ class FrameCache(Generic[Item]):
                 self.items.move_to_end(frame_id)
                 return self.items[frame_id]
             pending = self.pending.pop(frame_id, None)
-        item = pending.result() if pending is not None else self._read(frame_id)
+        item = pending.result() if pending is not None else self.load(frame_id)
         with self.lock:
             self.items[frame_id] = item
             self.items.move_to_end(frame_id)
@@ -73,11 +72,7 @@ class FrameCache(Generic[Item]):
             if self.reader is None:
                 self.reader = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-reader")
             for frame_id in wanted[:room]:
-                self.pending[frame_id] = self.reader.submit(self._read, frame_id)
-
-    def _read(self, frame_id: int) -> Item:
-        self.reads += 1
-        return self.load(frame_id)
+                self.pending[frame_id] = self.reader.submit(self.load, frame_id)
 
     def close(self) -> None:
         """Wait for reads in flight and stop the reader thread."""

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from glimpse.errors import GlimpseError
 from glimpse.pipeline.prepare import locate_run, prepare_run, run_lock
-from glimpse.pipeline.stages import stage_spec
+from glimpse.pipeline.stages import named_stage
 
 REPO_ROOT = Path(__file__).resolve().parent.parent.parent
 PIPELINE_MAKEFILE = REPO_ROOT / "mk" / "pipeline.mk"
@@ -28,10 +28,7 @@ def run_stages(scene: Path, out: Path, cli_params: str, stage: str | None, pytho
     """Run every stage that is out of date (``stage`` None: the whole pipeline), or rerun ``stage`` and
     whatever it needs. Returns make's exit status; bad input raises GlimpseError before anything runs."""
     if stage is not None:
-        try:
-            stage_spec(stage)
-        except ValueError as exc:
-            raise GlimpseError(str(exc)) from None
+        named_stage(stage)
     make = shutil.which("make")
     if make is None:
         raise GlimpseError("the pipeline needs GNU make on PATH (Debian: apt-get install make)")

@@ -8,6 +8,8 @@ from __future__ import annotations
 import fnmatch
 from dataclasses import dataclass
 
+from glimpse.errors import GlimpseError
+
 
 @dataclass(frozen=True)
 class StageSpec:
@@ -113,6 +115,14 @@ def stage_spec(name: str) -> StageSpec:
         if spec.name == name:
             return spec
     raise ValueError(f"unknown stage {name!r}; known stages: {', '.join(STAGE_NAMES)}")
+
+
+def named_stage(name: str) -> StageSpec:
+    """``stage_spec`` for a name a user gave (a command-line argument): GlimpseError when unknown."""
+    try:
+        return stage_spec(name)
+    except ValueError as exc:
+        raise GlimpseError(str(exc)) from None
 
 
 if __name__ == "__main__":  # `make print-dag`
