@@ -5,11 +5,16 @@
 // integer coordinates); skip when power > 0 or alpha = min(0.999, o exp(power)) < 1/255;
 // front to back, a pixel stops before its transmittance would reach 1e-4.
 //
-// Each tile is processed by one thread, Gaussian by Gaussian (outer loop) over the pixels of
-// the Gaussian's box clipped to the tile (inner loop), so the inner loop is short and
-// vectorisable. The backward accumulates gradients per thread (no atomics) and sums them.
+// Tiles are shared among threads dynamically (busy tiles do not hold up a thread that has finished
+// its share). Within a tile, Gaussians are taken one by one (outer loop); for each row of the
+// Gaussian's box, all 16 pixels of the tile's row are computed branch-free in SIMD lanes, pixels
+// outside the box masked off (a fixed trip count: no scalar epilogue), then each channel is
+// accumulated in a second vector loop over the same row (per-tile state is stored channel-major).
+// The backward walks each tile back to front the same way, keeps per-thread gradient buffers (no
+// atomics) and sums them.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -22,6 +27,9 @@ namespace {
 constexpr float kAlphaMin = 1.0f / 255.0f;
 constexpr float kAlphaMax = 0.999f;
 constexpr float kTransmittanceMin = 1e-4f;
+constexpr int kTile = 16;  // pixels per tile side (glimpse/render/rasterize.py TILE_SIZE)
+constexpr int kTilePixels = kTile * kTile;
+constexpr int kLanes = 8;  // pixels of a row computed together (one AVX2 vector)
 
 struct Inputs {
   const float* means2d;   // [N, 2]
@@ -31,7 +39,7 @@ struct Inputs {
   const float* extents;   // [N, 2] half-extents of the box where alpha can reach 1/255
   const int* offsets;     // [tiles + 1]
   const int* ids;         // [M]
-  int64_t channels, width, height, tile, tiles_x, tiles_y;
+  int64_t channels, width, height, tiles_x, tiles_y;
 };
 
 // exp(x) for x <= 0, branch-free so that loops over pixels vectorise (std::exp is a library
@@ -60,18 +68,23 @@ inline void box_range(float centre, float extent, int64_t start, int64_t stop, i
   hi = std::min<int64_t>(stop, static_cast<int64_t>(std::floor(centre + extent)) + 1);
 }
 
-// One Gaussian as a tile sees it: its parameters and its box clipped to the tile, [xa, xb) x [ya, yb).
+// One Gaussian as a tile sees it: its parameters and its box clipped to the tile, as tile-relative
+// columns [xa, xb) and image rows [ya, yb).
 struct TileGaussian {
   float mx, my, a, b, c, o;
   const float* f;
-  int64_t xa, xb, ya, yb;
+  int xa, xb;
+  int64_t ya, yb;
 };
 
 inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x1, int64_t y0, int64_t y1) {
   TileGaussian t{in.means2d[2 * g], in.means2d[2 * g + 1], in.conics[3 * g], in.conics[3 * g + 1],
                  in.conics[3 * g + 2], in.opacities[g], in.features + g * in.channels, 0, 0, 0, 0};
-  box_range(t.mx, in.extents[2 * g], x0, x1, t.xa, t.xb);
+  int64_t xa, xb;
+  box_range(t.mx, in.extents[2 * g], x0, x1, xa, xb);
   box_range(t.my, in.extents[2 * g + 1], y0, y1, t.ya, t.yb);
+  t.xa = static_cast<int>(xa - x0);
+  t.xb = static_cast<int>(xb - x0);
   return t;
 }
 
@@ -86,11 +99,27 @@ Inputs make_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, co
   TORCH_CHECK(means2d.is_contiguous() && conics.is_contiguous() && opacities.is_contiguous() &&
                   features.is_contiguous() && extents.is_contiguous() && offsets.is_contiguous() && ids.is_contiguous(),
               "composite_cpu: contiguous inputs expected");
+  TORCH_CHECK(tile == kTile, "composite_cpu: tiles of ", kTile, " pixels expected, got ", tile);
   const int64_t tiles_x = (width + tile - 1) / tile, tiles_y = (height + tile - 1) / tile;
   TORCH_CHECK(offsets.numel() == tiles_x * tiles_y + 1, "composite_cpu: tile_offsets has the wrong length");
   return {means2d.data_ptr<float>(), conics.data_ptr<float>(), opacities.data_ptr<float>(),
           features.data_ptr<float>(), extents.data_ptr<float>(), offsets.data_ptr<int>(), ids.data_ptr<int>(),
-          features.size(1), width, height, tile, tiles_x, tiles_y};
+          features.size(1), width, height, tiles_x, tiles_y};
+}
+
+// Tile k's pixel rectangle [x0, x1) x [y0, y1).
+struct TileRect {
+  int64_t x0, y0, x1, y1;
+};
+
+inline TileRect tile_rect(const Inputs& in, int64_t k) {
+  const int64_t x0 = (k % in.tiles_x) * kTile, y0 = (k / in.tiles_x) * kTile;
+  return {x0, y0, std::min<int64_t>(x0 + kTile, in.width), std::min<int64_t>(y0 + kTile, in.height)};
+}
+
+// The Gaussian's exponent -0.5 (a dx^2 + c dy^2) - b dx dy at dx = mean_x - pixel_x, dy = mean_y - pixel_y.
+inline float gaussian_power(const TileGaussian& t, float dx, float dy) {
+  return -0.5f * (t.a * dx * dx + t.c * dy * dy) - t.b * dx * dy;
 }
 
 }  // namespace
@@ -103,7 +132,7 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
                                              int64_t height, int64_t tile) {
   const Inputs in = make_inputs(means2d, conics, opacities, features, extents, tile_offsets, gaussian_ids, width,
                                 height, tile);
-  const int64_t C = in.channels;
+  const int64_t C = in.channels, tiles = in.tiles_x * in.tiles_y;
   // every pixel is written by its tile below: no fill needed
   auto image = torch::empty({height, width, C}, features.options());
   auto final_T = torch::empty({height, width}, features.options());
@@ -112,64 +141,69 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
   float* T_ptr = final_T.data_ptr<float>();
   int* last_ptr = last.data_ptr<int>();
 
-  at::parallel_for(0, in.tiles_x * in.tiles_y, 1, [&](int64_t begin, int64_t end) {
-    const int64_t P = in.tile * in.tile;
-    std::vector<float> T(P), acc(P * C), alpha_row(in.tile);
-    std::vector<int> n_last(P);
-    std::vector<char> done(P);
-    for (int64_t k = begin; k < end; ++k) {
-      const int64_t x0 = (k % in.tiles_x) * in.tile, y0 = (k / in.tiles_x) * in.tile;
-      const int64_t x1 = std::min(x0 + in.tile, in.width), y1 = std::min(y0 + in.tile, in.height);
-      std::fill(T.begin(), T.end(), 1.0f);
-      std::fill(acc.begin(), acc.end(), 0.0f);
-      std::fill(n_last.begin(), n_last.end(), 0);
-      std::fill(done.begin(), done.end(), 0);
-      int64_t remaining = (x1 - x0) * (y1 - y0);
+#pragma omp parallel num_threads(at::get_num_threads())
+  {
+    // per-tile state, channel-major: acc[ch * kTilePixels + p]
+    alignas(64) float T[kTilePixels], live[kTilePixels], w[kLanes];
+    alignas(64) int n_last[kTilePixels];
+    std::vector<float> acc_storage(C * kTilePixels);
+    float* __restrict acc = acc_storage.data();
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t k = 0; k < tiles; ++k) {
+      const TileRect r = tile_rect(in, k);
+      std::fill(T, T + kTilePixels, 1.0f);
+      std::fill(live, live + kTilePixels, 1.0f);
+      std::fill(n_last, n_last + kTilePixels, 0);
+      std::fill(acc, acc + C * kTilePixels, 0.0f);
+      int remaining = static_cast<int>((r.x1 - r.x0) * (r.y1 - r.y0));
       const int start = in.offsets[k], stop = in.offsets[k + 1];
       for (int e = start; e < stop && remaining > 0; ++e) {
-        const int g = in.ids[e];
-        const TileGaussian tg = tile_gaussian(in, g, x0, x1, y0, y1);
-        const float mx = tg.mx, my = tg.my, a = tg.a, b = tg.b, c = tg.c, o = tg.o;
-        const float* f = tg.f;
-        const int64_t xa = tg.xa, xb = tg.xb, ya = tg.ya, yb = tg.yb;
-        for (int64_t y = ya; y < yb; ++y) {
-          const float dy = my - static_cast<float>(y);
-          const int width_in_box = static_cast<int>(xb - xa);
-          const float first_dx = mx - static_cast<float>(xa);
-          for (int i = 0; i < width_in_box; ++i) {  // vectorised (32-bit counter: AVX2 converts int32 only)
-            const float dx = first_dx - static_cast<float>(i);
-            const float power = -0.5f * (a * dx * dx + c * dy * dy) - b * dx * dy;
-            const float alpha = std::min(kAlphaMax, o * fast_exp(std::min(power, 0.0f)));
-            alpha_row[i] = (power <= 0.0f && alpha >= kAlphaMin) ? alpha : 0.0f;
-          }
-          for (int64_t x = xa; x < xb; ++x) {
-            const int64_t p = (y - y0) * in.tile + (x - x0);
-            const float alpha = alpha_row[x - xa];
-            if (done[p] || alpha == 0.0f) continue;
-            const float next_T = T[p] * (1.0f - alpha);
-            if (next_T <= kTransmittanceMin) {
-              done[p] = 1;
-              --remaining;
-              continue;
+        const TileGaussian tg = tile_gaussian(in, in.ids[e], r.x0, r.x1, r.y0, r.y1);
+        const int entry = e - start + 1;
+        for (int64_t y = tg.ya; y < tg.yb; ++y) {
+          const float dy = tg.my - static_cast<float>(y);
+          for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {  // the lane groups the box covers
+            const int base = static_cast<int>(y - r.y0) * kTile + x8;
+            const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
+            int stopped = 0;
+#pragma omp simd reduction(+ : stopped)
+            for (int i = 0; i < kLanes; ++i) {  // 32-bit counter: AVX2 converts int32 to float only
+              const float power = gaussian_power(tg, dx0 - static_cast<float>(i), dy);
+              const float alpha = std::min(kAlphaMax, tg.o * fast_exp(std::min(power, 0.0f)));
+              const bool hit = (x8 + i >= tg.xa) & (x8 + i < tg.xb) & (power <= 0.0f) & (alpha >= kAlphaMin) &
+                               (live[base + i] != 0.0f);
+              const float t = T[base + i], next = t * (1.0f - alpha);
+              const bool ends = hit & (next <= kTransmittanceMin);  // this pixel stops before this Gaussian
+              const bool adds = hit & !ends;
+              // state updated by full-vector arithmetic, never by a select of the old value: a select
+              // compiles to a masked store, which stalls the loads of the next Gaussian (no forwarding)
+              w[i] = adds ? alpha * t : 0.0f;
+              T[base + i] = t * (adds ? 1.0f - alpha : 1.0f);  // = next where it adds, exactly t elsewhere
+              live[base + i] *= ends ? 0.0f : 1.0f;
+              n_last[base + i] = std::max(n_last[base + i], adds ? entry : 0);  // entries only grow
+              stopped += ends ? 1 : 0;
             }
-            const float w = alpha * T[p];
-            float* out = acc.data() + p * C;
-            for (int64_t ch = 0; ch < C; ++ch) out[ch] += w * f[ch];
-            T[p] = next_T;
-            n_last[p] = e - start + 1;
+            remaining -= stopped;
+            for (int64_t ch = 0; ch < C; ++ch) {
+              const float f = tg.f[ch];
+              float* __restrict out = acc + ch * kTilePixels + base;
+#pragma omp simd
+              for (int i = 0; i < kLanes; ++i) out[i] += w[i] * f;
+            }
           }
         }
       }
-      for (int64_t y = y0; y < y1; ++y) {
-        for (int64_t x = x0; x < x1; ++x) {
-          const int64_t p = (y - y0) * in.tile + (x - x0), q = y * in.width + x;
-          std::copy(acc.data() + p * C, acc.data() + (p + 1) * C, image_ptr + q * C);
+      for (int64_t y = r.y0; y < r.y1; ++y) {
+        for (int64_t x = r.x0; x < r.x1; ++x) {
+          const int p = static_cast<int>((y - r.y0) * kTile + (x - r.x0));
+          const int64_t q = y * in.width + x;
+          for (int64_t ch = 0; ch < C; ++ch) image_ptr[q * C + ch] = acc[ch * kTilePixels + p];
           T_ptr[q] = T[p];
           last_ptr[q] = n_last[p];
         }
       }
     }
-  });
+  }
   return {image, final_T, last};
 }
 
@@ -183,7 +217,7 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
   const Inputs in = make_inputs(means2d, conics, opacities, features, extents, tile_offsets, gaussian_ids, width,
                                 height, tile);
   grad_image = grad_image.contiguous();
-  const int64_t C = in.channels, N = means2d.size(0);
+  const int64_t C = in.channels, N = means2d.size(0), tiles = in.tiles_x * in.tiles_y;
   const int64_t stride = 6 + C;  // per Gaussian: mean (2), conic (3), opacity (1), features (C)
   const int threads = at::get_num_threads();
   auto buffers = torch::zeros({threads, N, stride}, features.options());
@@ -192,89 +226,118 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
   const float* T_final = final_T.data_ptr<float>();
   const int* last_ptr = last.data_ptr<int>();
 
-  at::parallel_for(0, in.tiles_x * in.tiles_y, 1, [&](int64_t begin, int64_t end) {
-    float* grads = buffer_ptr + at::get_thread_num() * N * stride;
-    const int64_t P = in.tile * in.tile;
-    std::vector<float> T(P), behind(P * C), last_alpha(P), last_f(P * C), dL_tile(P * C), local(stride);
-    std::vector<float> G_row(in.tile), power_row(in.tile);
-    std::vector<int> n_last(P);
-    for (int64_t k = begin; k < end; ++k) {
-      const int64_t x0 = (k % in.tiles_x) * in.tile, y0 = (k / in.tiles_x) * in.tile;
-      const int64_t x1 = std::min(x0 + in.tile, in.width), y1 = std::min(y0 + in.tile, in.height);
+#pragma omp parallel num_threads(threads)
+  {
+    float* grads = buffer_ptr + omp_get_thread_num() * N * stride;
+    // per-tile state; per-channel arrays are channel-major ([ch * kTilePixels + p])
+    alignas(64) float T[kTilePixels], last_alpha[kTilePixels];
+    alignas(64) int n_last[kTilePixels];
+    // per row: weight, alpha, Gaussian value, hit mask, alpha of the pixel's previous (behind) contributor
+    alignas(64) float w[kLanes], alpha_row[kLanes], G_row[kLanes], hit_row[kLanes], behind_alpha[kLanes],
+        dL_dalpha[kLanes];
+    std::vector<float> storage(3 * C * kTilePixels), lane_grads(stride * kLanes);
+    float* __restrict behind = storage.data();                  // colour behind, normalised
+    float* __restrict last_f = behind + C * kTilePixels;        // features of the pixel's previous contributor
+    float* __restrict dL_tile = last_f + C * kTilePixels;       // the image's gradient
+    // one Gaussian's gradients, per lane ([j * kLanes + i], j as in the output: mean, conic, opacity, features),
+    // summed over lanes once per Gaussian and tile
+    float* __restrict lanes = lane_grads.data();
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t k = 0; k < tiles; ++k) {
+      const TileRect r = tile_rect(in, k);
       int max_last = 0;
-      std::fill(behind.begin(), behind.end(), 0.0f);
-      std::fill(last_alpha.begin(), last_alpha.end(), 0.0f);
-      std::fill(last_f.begin(), last_f.end(), 0.0f);
-      for (int64_t y = y0; y < y1; ++y) {
-        for (int64_t x = x0; x < x1; ++x) {
-          const int64_t p = (y - y0) * in.tile + (x - x0), q = y * in.width + x;
+      std::fill(T, T + kTilePixels, 1.0f);
+      std::fill(n_last, n_last + kTilePixels, 0);
+      std::fill(last_alpha, last_alpha + kTilePixels, 0.0f);
+      std::fill(storage.begin(), storage.end(), 0.0f);
+      for (int64_t y = r.y0; y < r.y1; ++y) {
+        for (int64_t x = r.x0; x < r.x1; ++x) {
+          const int p = static_cast<int>((y - r.y0) * kTile + (x - r.x0));
+          const int64_t q = y * in.width + x;
           T[p] = T_final[q];
           n_last[p] = last_ptr[q];
           max_last = std::max(max_last, n_last[p]);
-          std::copy(dL + q * C, dL + (q + 1) * C, dL_tile.data() + p * C);
+          for (int64_t ch = 0; ch < C; ++ch) dL_tile[ch * kTilePixels + p] = dL[q * C + ch];
         }
       }
       const int start = in.offsets[k];
       for (int e = start + max_last - 1; e >= start; --e) {  // back to front
         const int g = in.ids[e];
-        const TileGaussian tg = tile_gaussian(in, g, x0, x1, y0, y1);
-        const float mx = tg.mx, my = tg.my, a = tg.a, b = tg.b, c = tg.c, o = tg.o;
-        const float* f = tg.f;
-        const int64_t xa = tg.xa, xb = tg.xb, ya = tg.ya, yb = tg.yb;
-        std::fill(local.begin(), local.end(), 0.0f);
-        bool touched = false;
-        for (int64_t y = ya; y < yb; ++y) {
-          const float dy = my - static_cast<float>(y);
-          const int width_in_box = static_cast<int>(xb - xa);
-          const float first_dx = mx - static_cast<float>(xa);
-          for (int i = 0; i < width_in_box; ++i) {  // vectorised pass
-            const float dx = first_dx - static_cast<float>(i);
-            const float power = -0.5f * (a * dx * dx + c * dy * dy) - b * dx * dy;
-            power_row[i] = power;
-            G_row[i] = fast_exp(std::min(power, 0.0f));
-          }
-          for (int64_t x = xa; x < xb; ++x) {
-            const int64_t p = (y - y0) * in.tile + (x - x0);
-            if (e - start >= n_last[p]) continue;  // after this pixel's last contributor
-            const float dx = mx - static_cast<float>(x);
-            if (power_row[x - xa] > 0.0f) continue;
-            const float G = G_row[x - xa];
-            const float raw = o * G;
-            const float alpha = std::min(kAlphaMax, raw);
-            if (alpha < kAlphaMin) continue;
-            touched = true;
-            T[p] /= (1.0f - alpha);  // transmittance in front of this Gaussian
-            const float w = alpha * T[p];
-            const float* dLp = dL_tile.data() + p * C;
-            float* bp = behind.data() + p * C;
-            float* lf = last_f.data() + p * C;
-            float dL_dalpha = 0.0f;
-            for (int64_t ch = 0; ch < C; ++ch) {
-              local[6 + ch] += w * dLp[ch];
-              bp[ch] = last_alpha[p] * lf[ch] + (1.0f - last_alpha[p]) * bp[ch];  // colour behind, normalised
-              lf[ch] = f[ch];
-              dL_dalpha += (f[ch] - bp[ch]) * dLp[ch];
+        const TileGaussian tg = tile_gaussian(in, g, r.x0, r.x1, r.y0, r.y1);
+        const int index = e - start;
+        int touched = 0;
+        std::fill(lanes, lanes + stride * kLanes, 0.0f);
+        for (int64_t y = tg.ya; y < tg.yb; ++y) {
+          const float dy = tg.my - static_cast<float>(y);
+          for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {
+            const int base = static_cast<int>(y - r.y0) * kTile + x8;
+            const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
+            int hits = 0;
+#pragma omp simd reduction(+ : hits)
+            for (int i = 0; i < kLanes; ++i) {
+              const float power = gaussian_power(tg, dx0 - static_cast<float>(i), dy);
+              const float G = fast_exp(std::min(power, 0.0f));
+              const float alpha = std::min(kAlphaMax, tg.o * G);
+              const bool hit = (x8 + i >= tg.xa) & (x8 + i < tg.xb) & (index < n_last[base + i]) & (power <= 0.0f) &
+                               (alpha >= kAlphaMin);
+              // updates as in the forward: arithmetic with 0/1 factors (exact), no masked stores
+              const float t = T[base + i] / (hit ? 1.0f - alpha : 1.0f);  // transmittance in front of it
+              const float h = hit ? 1.0f : 0.0f;
+              T[base + i] = t;
+              w[i] = h * alpha * t;
+              alpha_row[i] = alpha;
+              G_row[i] = G;
+              hit_row[i] = h;
+              behind_alpha[i] = last_alpha[base + i];
+              last_alpha[base + i] = h * alpha + (1.0f - h) * behind_alpha[i];
+              dL_dalpha[i] = 0.0f;
+              hits += hit ? 1 : 0;
             }
-            dL_dalpha *= T[p];
-            last_alpha[p] = alpha;
-            if (raw <= kAlphaMax) {  // a clamped alpha does not depend on o or the Gaussian
-              const float dL_dpower = dL_dalpha * alpha;
-              local[5] += G * dL_dalpha;
-              local[2] += -0.5f * dx * dx * dL_dpower;
-              local[3] += -dx * dy * dL_dpower;
-              local[4] += -0.5f * dy * dy * dL_dpower;
-              local[0] += -(a * dx + b * dy) * dL_dpower;
-              local[1] += -(b * dx + c * dy) * dL_dpower;
+            if (hits == 0) continue;
+            touched = 1;
+            for (int64_t ch = 0; ch < C; ++ch) {
+              const float f = tg.f[ch];
+              float* __restrict bp = behind + ch * kTilePixels + base;
+              float* __restrict lf = last_f + ch * kTilePixels + base;
+              const float* __restrict dLp = dL_tile + ch * kTilePixels + base;
+              float* __restrict grad_f = lanes + (6 + ch) * kLanes;
+#pragma omp simd
+              for (int i = 0; i < kLanes; ++i) {
+                const float h = hit_row[i];
+                grad_f[i] += w[i] * dLp[i];
+                const float updated = behind_alpha[i] * lf[i] + (1.0f - behind_alpha[i]) * bp[i];
+                bp[i] = h * updated + (1.0f - h) * bp[i];
+                lf[i] = h * f + (1.0f - h) * lf[i];
+                dL_dalpha[i] += h * ((f - updated) * dLp[i]);
+              }
+            }
+#pragma omp simd
+            for (int i = 0; i < kLanes; ++i) {
+              // a clamped alpha does not depend on o or the Gaussian
+              const bool free = (hit_row[i] != 0.0f) & (tg.o * G_row[i] <= kAlphaMax);
+              const float dx = dx0 - static_cast<float>(i);
+              const float d_alpha = dL_dalpha[i] * T[base + i];
+              const float d_power = free ? d_alpha * alpha_row[i] : 0.0f;
+              lanes[0 * kLanes + i] += -(tg.a * dx + tg.b * dy) * d_power;
+              lanes[1 * kLanes + i] += -(tg.b * dx + tg.c * dy) * d_power;
+              lanes[2 * kLanes + i] += -0.5f * dx * dx * d_power;
+              lanes[3 * kLanes + i] += -dx * dy * d_power;
+              lanes[4 * kLanes + i] += -0.5f * dy * dy * d_power;
+              lanes[5 * kLanes + i] += free ? G_row[i] * d_alpha : 0.0f;
             }
           }
         }
         if (touched) {
           float* gg = grads + static_cast<int64_t>(g) * stride;
-          for (int64_t j = 0; j < stride; ++j) gg[j] += local[j];
+          for (int64_t j = 0; j < stride; ++j) {
+            float sum = 0.0f;
+            for (int i = 0; i < kLanes; ++i) sum += lanes[j * kLanes + i];
+            gg[j] += sum;
+          }
         }
       }
     }
-  });
+  }
   auto total = buffers.sum(0);  // [N, stride]
   return {total.slice(1, 0, 2).contiguous(), total.slice(1, 2, 5).contiguous(), total.select(1, 5).contiguous(),
           total.slice(1, 6, 6 + C).contiguous()};
