@@ -27,21 +27,22 @@ def bin_gaussians(means2d: Tensor, extents: Tensor, depths: Tensor, visible: Ten
     """Assign each visible Gaussian to every tile its box (mean +- extents, pixels) overlaps.
 
     Within a tile, Gaussians are ordered by depth, ties by index. ``use_cpu_kernel``: the C++
-    counting sort (same result, faster); otherwise one sort on (tile, depth rank) keys.
+    kernel (a radix sort by depth, then a counting sort into tiles: same result, faster); otherwise one sort
+    on (tile, depth rank) keys.
     """
     tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    if use_cpu_kernel:
+        from glimpse.render.composite_cpu import extension
+
+        inputs = [t.detach().float().contiguous() for t in (means2d, extents, depths)]
+        gaussian_ids, offsets = extension().bin_gaussians(*inputs, visible.contiguous(), width, height, tile_size)
+        return TileBins(gaussian_ids, offsets, tile_size, tiles_x, tiles_y)
     ids = torch.nonzero(visible).squeeze(1)
     ids = ids[torch.argsort(depths[ids], stable=True)]  # front to back, ties by index
     lo = torch.floor((means2d[ids] - extents[ids]) / tile_size).to(torch.int64)
     hi = torch.floor((means2d[ids] + extents[ids]) / tile_size).to(torch.int64)
     x0, y0 = lo[:, 0].clamp(0, tiles_x - 1), lo[:, 1].clamp(0, tiles_y - 1)
     x1, y1 = hi[:, 0].clamp(0, tiles_x - 1), hi[:, 1].clamp(0, tiles_y - 1)
-    if use_cpu_kernel:
-        from glimpse.render.composite_cpu import extension
-
-        rects = torch.stack([x0, y0, x1, y1], -1).to(torch.int32).contiguous()
-        gaussian_ids, offsets = extension().bin_tiles(rects, ids.to(torch.int32).contiguous(), tiles_x, tiles_y)
-        return TileBins(gaussian_ids, offsets, tile_size, tiles_x, tiles_y)
     counts_x, counts_y = x1 - x0 + 1, y1 - y0 + 1
     counts = counts_x * counts_y
     owner = torch.repeat_interleave(torch.arange(len(ids)), counts)  # [M] index into ids

@@ -1,5 +1,5 @@
-"""The C++ kernels (csrc/: tile binning and compositing, projection, posing a frozen person): built on
-first use, cached.
+"""The C++ kernels (csrc/: tile binning and compositing, projection, covariances and SH colours, posing a
+frozen person): built on first use, cached.
 
 The build cache is keyed by the source, the flags and torch's version, under
 $GLIMPSE_CACHE (default ~/.cache/glimpse). The sources are copied into it and built from
@@ -32,7 +32,7 @@ from glimpse.render.binning import TileBins
 
 log = logging.getLogger("glimpse")
 CSRC = Path(__file__).resolve().parent / "csrc"
-SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "pose_cpu.cpp")]
+SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "preprocess_cpu.cpp", "pose_cpu.cpp")]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).
@@ -102,8 +102,10 @@ def extension() -> ModuleType:
                        + ". Install a C++ compiler (Debian: g++) or set render.backend=torch")
 
 
+@lru_cache(maxsize=1)
 def available() -> bool:
-    """Whether the kernel builds here (a build that waits too long for another process raises LockBusy)."""
+    """Whether the kernel builds here (a build that waits too long for another process raises LockBusy); tried
+    once per process."""
     try:
         extension()
     except LockBusy:
@@ -111,6 +113,11 @@ def available() -> bool:
     except GlimpseError:
         return False
     return True
+
+
+def kernel_applies(*tensors: Tensor) -> bool:
+    """Whether the C++ kernels can compute on ``tensors``: all float32 on the CPU, and the kernel builds here."""
+    return all(t.device.type == "cpu" and t.dtype == torch.float32 for t in tensors) and available()
 
 
 class _Composite(torch.autograd.Function):

@@ -83,10 +83,39 @@ def quat_to_rotation(quats: Tensor) -> Tensor:
     ], dim=-1).reshape(-1, 3, 3)
 
 
-def quat_scale_to_covariance(quats: Tensor, scales: Tensor) -> Tensor:
-    """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ."""
+def quat_scale_to_covariance_torch(quats: Tensor, scales: Tensor) -> Tensor:
+    """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ
+    (the reference, in PyTorch)."""
     scaled = quat_to_rotation(quats) * scales[:, None, :]
     return scaled @ scaled.transpose(1, 2)
+
+
+class _CovarianceCPU(torch.autograd.Function):
+    """quat_scale_to_covariance_torch computed by the C++ kernel (csrc/preprocess_cpu.cpp), hand-written backward."""
+
+    @staticmethod
+    def forward(ctx, quats: Tensor, scales: Tensor) -> Tensor:
+        from glimpse.render.composite_cpu import extension
+
+        inputs = [t.detach().contiguous() for t in (quats, scales)]
+        ctx.save_for_backward(*inputs)
+        return extension().covariance_forward(*inputs)
+
+    @staticmethod
+    def backward(ctx, v_covariances: Tensor):
+        from glimpse.render.composite_cpu import extension
+
+        return tuple(extension().covariance_backward(*ctx.saved_tensors, v_covariances.float()))
+
+
+def quat_scale_to_covariance(quats: Tensor, scales: Tensor) -> Tensor:
+    """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ;
+    by the C++ kernel for float32 CPU tensors where it builds, else by the PyTorch reference (same maths)."""
+    from glimpse.render.composite_cpu import kernel_applies
+
+    if kernel_applies(quats, scales):
+        return _CovarianceCPU.apply(quats, scales)
+    return quat_scale_to_covariance_torch(quats, scales)
 
 
 def project_gaussians(means: Tensor, covariances: Tensor, opacities: Tensor, camera: Camera,

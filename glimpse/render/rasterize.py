@@ -27,8 +27,9 @@ from glimpse.render.config import Backend, RenderConfig
 from glimpse.render.composite_torch import composite_torch
 from glimpse.render.projection import (
     Camera, Projected, project_gaussians, project_gaussians_cpu, quat_scale_to_covariance,
+    quat_scale_to_covariance_torch,
 )
-from glimpse.render.sh import sh_to_rgb
+from glimpse.render.sh import sh_to_rgb, sh_to_rgb_torch
 
 TILE_SIZE = 16  # pixels per tile side
 
@@ -65,7 +66,8 @@ def choose_backend(backend: Backend, device: torch.device) -> str:
 
 
 def _colours(camera: Camera, means: Tensor, colors: Tensor | None, sh: Tensor | None, sh_degree: int | None,
-             view_dirs: Tensor | None) -> Tensor:
+             view_dirs: Tensor | None, reference: bool) -> Tensor:
+    """colors, or the SH colours along view_dirs (PyTorch's reference maths when ``reference``)."""
     if (colors is None) == (sh is None):
         raise ValueError("rasterize: give exactly one of colors [N, 3] and sh [N, K, 3]")
     if colors is not None:
@@ -73,7 +75,7 @@ def _colours(camera: Camera, means: Tensor, colors: Tensor | None, sh: Tensor | 
     degree = int(round(sh.shape[1] ** 0.5)) - 1 if sh_degree is None else sh_degree
     if view_dirs is None:  # from the camera centre to each Gaussian, in the world frame
         view_dirs = means - camera.centre.to(means)
-    return sh_to_rgb(degree, sh, view_dirs)
+    return (sh_to_rgb_torch if reference else sh_to_rgb)(degree, sh, view_dirs)
 
 
 def _features(rgb: Tensor, depths: Tensor, groups: Tensor | None, num_groups: int) -> Tensor:
@@ -101,12 +103,12 @@ def rasterize(
     groups [N] int in [0, num_groups) for per-group alphas. ``settings`` (the pipeline's ``render`` section,
     passed whole so that every render path draws alike) picks the backend and the antialiasing.
     """
+    name = choose_backend(settings.backend, means.device)
     if covariances is None:
         if quats is None or scales is None:
             raise ValueError("rasterize: give quats and scales, or covariances")
-        covariances = quat_scale_to_covariance(quats, scales)
-    name = choose_backend(settings.backend, means.device)
-    rgb = _colours(camera, means, colors, sh, sh_degree, view_dirs)
+        covariances = (quat_scale_to_covariance_torch if name == "torch" else quat_scale_to_covariance)(quats, scales)
+    rgb = _colours(camera, means, colors, sh, sh_degree, view_dirs, reference=name == "torch")
     if groups is not None and num_groups is None:
         num_groups = int(groups.max()) + 1 if len(groups) else 1
     if name == "gsplat":

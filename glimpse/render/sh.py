@@ -121,8 +121,41 @@ def sh_basis(degree: int, dirs: Tensor) -> Tensor:
     return torch.stack(terms, dim=-1)  # [..., K]
 
 
+class _ShCPU(torch.autograd.Function):
+    """sh_to_rgb_torch for [N, K, C] coefficients and [N, 3] directions by the C++ kernel
+    (csrc/preprocess_cpu.cpp), hand-written backward."""
+
+    @staticmethod
+    def forward(ctx, degree: int, sh_coeffs: Tensor, dirs: Tensor) -> Tensor:
+        from glimpse.render.composite_cpu import extension
+
+        inputs = [t.detach().contiguous() for t in (sh_coeffs, dirs)]
+        ctx.save_for_backward(*inputs)
+        ctx.degree = degree
+        return extension().sh_forward(degree, *inputs)
+
+    @staticmethod
+    def backward(ctx, v_rgb: Tensor):
+        from glimpse.render.composite_cpu import extension
+
+        v_coeffs, v_dirs = extension().sh_backward(ctx.degree, *ctx.saved_tensors, v_rgb.float())
+        return None, v_coeffs, v_dirs
+
+
 def sh_to_rgb(degree: int, sh_coeffs: Tensor, dirs: Tensor) -> Tensor:
-    """Colour seen along ``dirs`` from SH coefficients (3DGS convention).
+    """:func:`sh_to_rgb_torch`, computed by the C++ kernel for float32 CPU tensors of shapes [N, K, C] and
+    [N, 3] where it builds (same maths, one pass instead of an autograd graph of elementwise kernels)."""
+    from glimpse.render.composite_cpu import kernel_applies
+
+    num_coeffs = num_sh_coeffs(degree)
+    if (sh_coeffs.ndim == 3 and dirs.ndim == 2 and dirs.shape == (sh_coeffs.shape[0], SPATIAL_DIMS)
+            and sh_coeffs.shape[1] >= num_coeffs and kernel_applies(sh_coeffs, dirs)):
+        return _ShCPU.apply(degree, sh_coeffs, dirs)
+    return sh_to_rgb_torch(degree, sh_coeffs, dirs)
+
+
+def sh_to_rgb_torch(degree: int, sh_coeffs: Tensor, dirs: Tensor) -> Tensor:
+    """Colour seen along ``dirs`` from SH coefficients (3DGS convention; the reference, in PyTorch).
 
     ``rgb = max(sum_k Y_k(dirs) * sh_coeffs[..., k, :] + 0.5, 0)``, summed over the
     first ``(degree+1)^2`` coefficients only (a degree-3 model can be shown at a lower

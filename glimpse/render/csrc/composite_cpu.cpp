@@ -220,15 +220,21 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
   const int64_t C = in.channels, N = means2d.size(0), tiles = in.tiles_x * in.tiles_y;
   const int64_t stride = 6 + C;  // per Gaussian: mean (2), conic (3), opacity (1), features (C)
   const int threads = at::get_num_threads();
-  auto buffers = torch::zeros({threads, N, stride}, features.options());
+  // per-thread gradient sums, each zeroed by its own thread (no serial fill), then summed in parallel
+  auto buffers = torch::empty({threads, N, stride}, features.options());
+  auto total = torch::empty({N, stride}, features.options());
   float* buffer_ptr = buffers.data_ptr<float>();
+  float* total_ptr = total.data_ptr<float>();
   const float* dL = grad_image.data_ptr<float>();
   const float* T_final = final_T.data_ptr<float>();
   const int* last_ptr = last.data_ptr<int>();
 
 #pragma omp parallel num_threads(threads)
   {
+    const int team = omp_get_num_threads();  // may be fewer than asked (nested parallelism)
     float* grads = buffer_ptr + omp_get_thread_num() * N * stride;
+    std::fill(grads, grads + N * stride, 0.0f);
+#pragma omp barrier
     // per-tile state; per-channel arrays are channel-major ([ch * kTilePixels + p])
     alignas(64) float T[kTilePixels], last_alpha[kTilePixels];
     alignas(64) int n_last[kTilePixels];
@@ -337,34 +343,82 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
         }
       }
     }
+#pragma omp for schedule(static)
+    for (int64_t j = 0; j < N * stride; ++j) {
+      float sum = 0.0f;
+      for (int t = 0; t < team; ++t) sum += buffer_ptr[t * N * stride + j];
+      total_ptr[j] = sum;
+    }
   }
-  auto total = buffers.sum(0);  // [N, stride]
   return {total.slice(1, 0, 2).contiguous(), total.slice(1, 2, 5).contiguous(), total.select(1, 5).contiguous(),
           total.slice(1, 6, 6 + C).contiguous()};
 }
 
-// Tile binning by counting sort. rects [V, 4] int32 (x0, y0, x1, y1: inclusive tile ranges) of the
-// visible Gaussians ids [V] int32, both already in front-to-back order; appending each Gaussian to its
-// tiles in that order leaves every tile's list sorted front to back.
-std::vector<torch::Tensor> bin_tiles(torch::Tensor rects, torch::Tensor ids, int64_t tiles_x, int64_t tiles_y) {
-  TORCH_CHECK(rects.dtype() == torch::kInt32 && ids.dtype() == torch::kInt32 && rects.is_contiguous() &&
-                  ids.is_contiguous(),
-              "bin_tiles: contiguous int32 inputs expected");
-  const int64_t V = ids.numel(), tiles = tiles_x * tiles_y;
-  const int* r = rects.data_ptr<int>();
-  const int* id = ids.data_ptr<int>();
-  auto offsets = torch::zeros({tiles + 1}, ids.options());
+// Tile binning (the rules of glimpse/render/binning.py): the visible Gaussians, sorted front to back by
+// depth (ties by index: a stable LSD radix sort on the depths' bits), each appended to every tile its box
+// (mean +- extents, pixels) overlaps, by counting sort, which keeps every tile's list in depth order.
+// means2d [N, 2], extents [N, 2], depths [N] float32; visible [N] bool. Returns gaussian_ids [M] int32
+// and tile_offsets [tiles + 1] int32.
+std::vector<torch::Tensor> bin_gaussians(torch::Tensor means2d, torch::Tensor extents, torch::Tensor depths,
+                                         torch::Tensor visible, int64_t width, int64_t height, int64_t tile) {
+  TORCH_CHECK(means2d.dtype() == torch::kFloat32 && extents.dtype() == torch::kFloat32 &&
+                  depths.dtype() == torch::kFloat32 && visible.dtype() == torch::kBool && means2d.is_contiguous() &&
+                  extents.is_contiguous() && depths.is_contiguous() && visible.is_contiguous(),
+              "bin_gaussians: contiguous float32 means2d, extents, depths and bool visible expected");
+  const int64_t N = depths.numel(), tiles_x = (width + tile - 1) / tile, tiles_y = (height + tile - 1) / tile;
+  const int64_t tiles = tiles_x * tiles_y;
+  const float *m = means2d.data_ptr<float>(), *ex = extents.data_ptr<float>(), *z = depths.data_ptr<float>();
+  const bool* vis = visible.data_ptr<bool>();
+  // keys: the depth's bits made to order as the floats do (flip all bits of negatives, the sign of positives)
+  std::vector<uint32_t> keys, keys_tmp;
+  std::vector<int> ids, ids_tmp;
+  for (int64_t n = 0; n < N; ++n) {
+    if (!vis[n]) continue;
+    uint32_t bits;
+    std::memcpy(&bits, z + n, sizeof bits);
+    keys.push_back(bits & 0x80000000u ? ~bits : bits | 0x80000000u);
+    ids.push_back(static_cast<int>(n));
+  }
+  const int64_t V = static_cast<int64_t>(ids.size());
+  keys_tmp.resize(V);
+  ids_tmp.resize(V);
+  constexpr int kRadixBits = 8, kBuckets = 1 << kRadixBits;
+  for (int shift = 0; shift < 32; shift += kRadixBits) {
+    int64_t count[kBuckets + 1] = {0};
+    for (int64_t v = 0; v < V; ++v) ++count[((keys[v] >> shift) & (kBuckets - 1)) + 1];
+    for (int i = 0; i < kBuckets; ++i) count[i + 1] += count[i];
+    for (int64_t v = 0; v < V; ++v) {
+      const int64_t to = count[(keys[v] >> shift) & (kBuckets - 1)]++;
+      keys_tmp[to] = keys[v];
+      ids_tmp[to] = ids[v];
+    }
+    keys.swap(keys_tmp);
+    ids.swap(ids_tmp);
+  }
+  // each Gaussian's inclusive tile rectangle, computed as binning.py does (float32 division, floor, clamp)
+  std::vector<int> rects(4 * V);
+  const float size = static_cast<float>(tile);
+  auto clamp = [](int64_t value, int64_t hi) { return static_cast<int>(std::min(std::max<int64_t>(value, 0), hi)); };
+  for (int64_t v = 0; v < V; ++v) {
+    const int g = ids[v];
+    rects[4 * v] = clamp(static_cast<int64_t>(std::floor((m[2 * g] - ex[2 * g]) / size)), tiles_x - 1);
+    rects[4 * v + 1] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] - ex[2 * g + 1]) / size)), tiles_y - 1);
+    rects[4 * v + 2] = clamp(static_cast<int64_t>(std::floor((m[2 * g] + ex[2 * g]) / size)), tiles_x - 1);
+    rects[4 * v + 3] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] + ex[2 * g + 1]) / size)), tiles_y - 1);
+  }
+  auto offsets = torch::zeros({tiles + 1}, torch::kInt32);
   int* off = offsets.data_ptr<int>();
+  const int* r = rects.data();
   for (int64_t v = 0; v < V; ++v)
     for (int ty = r[4 * v + 1]; ty <= r[4 * v + 3]; ++ty)
       for (int tx = r[4 * v]; tx <= r[4 * v + 2]; ++tx) ++off[ty * tiles_x + tx + 1];
   for (int64_t k = 0; k < tiles; ++k) off[k + 1] += off[k];
-  auto entries = torch::empty({off[tiles]}, ids.options());
+  auto entries = torch::empty({off[tiles]}, torch::kInt32);
   int* out = entries.data_ptr<int>();
   std::vector<int> fill(off, off + tiles);
   for (int64_t v = 0; v < V; ++v)
     for (int ty = r[4 * v + 1]; ty <= r[4 * v + 3]; ++ty)
-      for (int tx = r[4 * v]; tx <= r[4 * v + 2]; ++tx) out[fill[ty * tiles_x + tx]++] = id[v];
+      for (int tx = r[4 * v]; tx <= r[4 * v + 2]; ++tx) out[fill[ty * tiles_x + tx]++] = ids[v];
   return {entries, offsets};
 }
 
@@ -378,6 +432,12 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor c
                                             torch::Tensor v_means2d, torch::Tensor v_conics, torch::Tensor v_depths,
                                             torch::Tensor v_opac_out);
 
+// preprocess_cpu.cpp
+torch::Tensor covariance_forward(torch::Tensor quats, torch::Tensor scales);
+std::vector<torch::Tensor> covariance_backward(torch::Tensor quats, torch::Tensor scales, torch::Tensor v_cov);
+torch::Tensor sh_forward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs);
+std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs, torch::Tensor v_rgb);
+
 // pose_cpu.cpp
 std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joint_transforms,
                                         torch::Tensor canonical_inverse, torch::Tensor means, torch::Tensor covariances,
@@ -386,7 +446,11 @@ std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joi
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
   m.def("project_backward", &project_backward, "EWA projection, backward (CPU)");
-  m.def("bin_tiles", &bin_tiles, "Tile binning by counting sort (CPU)");
+  m.def("bin_gaussians", &bin_gaussians, "Tile binning: depth radix sort, then counting sort into tiles (CPU)");
+  m.def("covariance_forward", &covariance_forward, "Covariances from quaternions and scales, forward (CPU)");
+  m.def("covariance_backward", &covariance_backward, "Covariances from quaternions and scales, backward (CPU)");
+  m.def("sh_forward", &sh_forward, "Colours from spherical harmonics, forward (CPU)");
+  m.def("sh_backward", &sh_backward, "Colours from spherical harmonics, backward (CPU)");
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
   m.def("pose_forward", &pose_forward, "Posing a frozen person's Gaussians, forward (CPU)");

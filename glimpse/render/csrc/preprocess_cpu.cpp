@@ -1,0 +1,208 @@
+// Per-Gaussian preprocessing on the CPU, forward and hand-written backward: covariances from
+// rotations and scales, and colours from spherical harmonics. The maths and conventions are those
+// of glimpse/render/projection.py (quat_scale_to_covariance_torch) and glimpse/render/sh.py
+// (sh_to_rgb_torch), the references the tests compare these against. One pass per Gaussian in
+// place of PyTorch's dozens of elementwise kernels and their autograd graph.
+#include <torch/extension.h>
+#include <ATen/Parallel.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace {
+
+constexpr float kNormFloor = 1e-12f;  // torch.nn.functional.normalize's eps
+constexpr int64_t kGrain = 1024;
+
+// 3DGS's SH constants (glimpse/render/sh.py).
+constexpr float C0 = 0.28209479177387814f;
+constexpr float C1 = 0.4886025119029199f;
+constexpr float C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f, -1.0925484305920792f,
+                         0.5462742152960396f};
+constexpr float C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f, 0.3731763325901154f,
+                         -0.4570457994644658f, 1.445305721320277f, -0.5900435899266435f};
+constexpr float kRgbOffset = 0.5f;
+
+// Rotation matrix (row-major) of the unit quaternion (w, x, y, z).
+inline void rotation(float w, float x, float y, float z, float R[9]) {
+  R[0] = 1 - 2 * (y * y + z * z), R[1] = 2 * (x * y - w * z), R[2] = 2 * (x * z + w * y);
+  R[3] = 2 * (x * y + w * z), R[4] = 1 - 2 * (x * x + z * z), R[5] = 2 * (y * z - w * x);
+  R[6] = 2 * (x * z - w * y), R[7] = 2 * (y * z + w * x), R[8] = 1 - 2 * (x * x + y * y);
+}
+
+// The SH basis up to `degree` at the unit direction (x, y, z): K = (degree + 1)^2 values.
+inline void sh_basis(int degree, float x, float y, float z, float* b) {
+  b[0] = C0;
+  if (degree < 1) return;
+  b[1] = -C1 * y, b[2] = C1 * z, b[3] = -C1 * x;
+  if (degree < 2) return;
+  const float xx = x * x, yy = y * y, zz = z * z;
+  b[4] = C2[0] * x * y, b[5] = C2[1] * y * z, b[6] = C2[2] * (2 * zz - xx - yy), b[7] = C2[3] * x * z,
+  b[8] = C2[4] * (xx - yy);
+  if (degree < 3) return;
+  b[9] = C3[0] * y * (3 * xx - yy), b[10] = C3[1] * x * y * z, b[11] = C3[2] * y * (4 * zz - xx - yy),
+  b[12] = C3[3] * z * (2 * zz - 3 * xx - 3 * yy), b[13] = C3[4] * x * (4 * zz - xx - yy),
+  b[14] = C3[5] * z * (xx - yy), b[15] = C3[6] * x * (xx - 3 * yy);
+}
+
+// Gradient with respect to the unit direction of sum_k v_b[k] * basis_k(x, y, z).
+inline void sh_basis_backward(int degree, float x, float y, float z, const float* v_b, float& gx, float& gy,
+                              float& gz) {
+  gx = gy = gz = 0;
+  if (degree < 1) return;
+  gx += -C1 * v_b[3], gy += -C1 * v_b[1], gz += C1 * v_b[2];
+  if (degree < 2) return;
+  const float xx = x * x, yy = y * y, zz = z * z;
+  gx += C2[0] * y * v_b[4] - 2 * C2[2] * x * v_b[6] + C2[3] * z * v_b[7] + 2 * C2[4] * x * v_b[8];
+  gy += C2[0] * x * v_b[4] + C2[1] * z * v_b[5] - 2 * C2[2] * y * v_b[6] - 2 * C2[4] * y * v_b[8];
+  gz += C2[1] * y * v_b[5] + 4 * C2[2] * z * v_b[6] + C2[3] * x * v_b[7];
+  if (degree < 3) return;
+  gx += 6 * C3[0] * x * y * v_b[9] + C3[1] * y * z * v_b[10] - 2 * C3[2] * x * y * v_b[11] -
+        6 * C3[3] * x * z * v_b[12] + C3[4] * (4 * zz - 3 * xx - yy) * v_b[13] + 2 * C3[5] * x * z * v_b[14] +
+        C3[6] * (3 * xx - 3 * yy) * v_b[15];
+  gy += C3[0] * (3 * xx - 3 * yy) * v_b[9] + C3[1] * x * z * v_b[10] + C3[2] * (4 * zz - xx - 3 * yy) * v_b[11] -
+        6 * C3[3] * y * z * v_b[12] - 2 * C3[4] * x * y * v_b[13] - 2 * C3[5] * y * z * v_b[14] -
+        6 * C3[6] * x * y * v_b[15];
+  gz += C3[1] * x * y * v_b[10] + 8 * C3[2] * y * z * v_b[11] + C3[3] * (6 * zz - 3 * xx - 3 * yy) * v_b[12] +
+        8 * C3[4] * x * z * v_b[13] + C3[5] * (xx - yy) * v_b[14];
+}
+
+void check_float(const std::vector<torch::Tensor>& tensors, const char* what) {
+  for (const auto& t : tensors)
+    TORCH_CHECK(t.dtype() == torch::kFloat32 && t.is_contiguous() && t.device().is_cpu(), what,
+                ": contiguous float32 CPU tensors expected");
+}
+
+}  // namespace
+
+// quats [N, 4] (wxyz, any length), scales [N, 3] -> covariances [N, 3, 3] = R S S^T R^T.
+torch::Tensor covariance_forward(torch::Tensor quats, torch::Tensor scales) {
+  check_float({quats, scales}, "covariance_forward");
+  const int64_t N = quats.size(0);
+  auto out = torch::empty({N, 3, 3}, quats.options());
+  const float *q = quats.data_ptr<float>(), *s = scales.data_ptr<float>();
+  float* cov = out.data_ptr<float>();
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    for (int64_t n = begin; n < end; ++n) {
+      const float* qn = q + 4 * n;
+      const float norm = std::max(std::sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3]), kNormFloor);
+      float R[9], M[9];
+      rotation(qn[0] / norm, qn[1] / norm, qn[2] / norm, qn[3] / norm, R);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) M[3 * i + j] = R[3 * i + j] * s[3 * n + j];
+      float* c = cov + 9 * n;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) c[3 * i + j] = M[3 * i] * M[3 * j] + M[3 * i + 1] * M[3 * j + 1] + M[3 * i + 2] * M[3 * j + 2];
+    }
+  });
+  return out;
+}
+
+// Gradients of a loss with respect to quats [N, 4] and scales [N, 3], given v_cov [N, 3, 3].
+std::vector<torch::Tensor> covariance_backward(torch::Tensor quats, torch::Tensor scales, torch::Tensor v_cov) {
+  v_cov = v_cov.contiguous();
+  check_float({quats, scales, v_cov}, "covariance_backward");
+  const int64_t N = quats.size(0);
+  auto v_quats = torch::empty_like(quats), v_scales = torch::empty_like(scales);
+  const float *q = quats.data_ptr<float>(), *s = scales.data_ptr<float>(), *vc = v_cov.data_ptr<float>();
+  float *vq = v_quats.data_ptr<float>(), *vs = v_scales.data_ptr<float>();
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    for (int64_t n = begin; n < end; ++n) {
+      const float* qn = q + 4 * n;
+      const float norm = std::max(std::sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3]), kNormFloor);
+      const float w = qn[0] / norm, x = qn[1] / norm, y = qn[2] / norm, z = qn[3] / norm;
+      float R[9], M[9], vM[9], vR[9];
+      rotation(w, x, y, z, R);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) M[3 * i + j] = R[3 * i + j] * s[3 * n + j];
+      const float* G = vc + 9 * n;  // cov = M M^T: v_M = (G + G^T) M
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          float sum = 0;
+          for (int k = 0; k < 3; ++k) sum += (G[3 * i + k] + G[3 * k + i]) * M[3 * k + j];
+          vM[3 * i + j] = sum;
+        }
+      for (int j = 0; j < 3; ++j) {
+        vs[3 * n + j] = vM[j] * R[j] + vM[3 + j] * R[3 + j] + vM[6 + j] * R[6 + j];
+        for (int i = 0; i < 3; ++i) vR[3 * i + j] = vM[3 * i + j] * s[3 * n + j];
+      }
+      // through the rotation matrix of the unit quaternion
+      const float vw = 2 * (-z * vR[1] + y * vR[2] + z * vR[3] - x * vR[5] - y * vR[6] + x * vR[7]);
+      const float vx = 2 * (y * vR[1] + z * vR[2] + y * vR[3] - 2 * x * vR[4] - w * vR[5] + z * vR[6] + w * vR[7] -
+                            2 * x * vR[8]);
+      const float vy = 2 * (-2 * y * vR[0] + x * vR[1] + w * vR[2] + x * vR[3] + z * vR[5] - w * vR[6] + z * vR[7] -
+                            2 * y * vR[8]);
+      const float vz = 2 * (-2 * z * vR[0] - w * vR[1] + x * vR[2] + w * vR[3] - 2 * z * vR[4] + y * vR[5] +
+                            x * vR[6] + y * vR[7]);
+      // and through the normalisation q / |q|
+      const float along = w * vw + x * vx + y * vy + z * vz;
+      vq[4 * n] = (vw - w * along) / norm;
+      vq[4 * n + 1] = (vx - x * along) / norm;
+      vq[4 * n + 2] = (vy - y * along) / norm;
+      vq[4 * n + 3] = (vz - z * along) / norm;
+    }
+  });
+  return {v_quats, v_scales};
+}
+
+// Colours max(sum_k Y_k(dirs) coeffs[:, k, :] + 0.5, 0) [N, C] from coeffs [N, K >= (degree + 1)^2, C] and
+// view directions dirs [N, 3] (any length).
+torch::Tensor sh_forward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs) {
+  check_float({coeffs, dirs}, "sh_forward");
+  const int64_t N = coeffs.size(0), K = coeffs.size(1), C = coeffs.size(2), used = (degree + 1) * (degree + 1);
+  TORCH_CHECK(degree >= 0 && degree <= 3 && K >= used, "sh_forward: bad degree or too few coefficients");
+  auto out = torch::empty({N, C}, coeffs.options());
+  const float *sh = coeffs.data_ptr<float>(), *d = dirs.data_ptr<float>();
+  float* rgb = out.data_ptr<float>();
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    float b[16];
+    for (int64_t n = begin; n < end; ++n) {
+      const float* dn = d + 3 * n;
+      const float norm = std::max(std::sqrt(dn[0] * dn[0] + dn[1] * dn[1] + dn[2] * dn[2]), kNormFloor);
+      sh_basis(static_cast<int>(degree), dn[0] / norm, dn[1] / norm, dn[2] / norm, b);
+      for (int64_t c = 0; c < C; ++c) {
+        float sum = 0;
+        for (int64_t k = 0; k < used; ++k) sum += b[k] * sh[(n * K + k) * C + c];
+        rgb[n * C + c] = std::max(sum + kRgbOffset, 0.0f);
+      }
+    }
+  });
+  return out;
+}
+
+// Gradients with respect to coeffs [N, K, C] (zero beyond the degree) and dirs [N, 3], given v_rgb [N, C].
+std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs, torch::Tensor v_rgb) {
+  v_rgb = v_rgb.contiguous();
+  check_float({coeffs, dirs, v_rgb}, "sh_backward");
+  const int64_t N = coeffs.size(0), K = coeffs.size(1), C = coeffs.size(2), used = (degree + 1) * (degree + 1);
+  auto v_coeffs = torch::zeros_like(coeffs), v_dirs = torch::empty_like(dirs);
+  const float *sh = coeffs.data_ptr<float>(), *d = dirs.data_ptr<float>(), *g = v_rgb.data_ptr<float>();
+  float *vsh = v_coeffs.data_ptr<float>(), *vd = v_dirs.data_ptr<float>();
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    float b[16], v_b[16];
+    for (int64_t n = begin; n < end; ++n) {
+      const float* dn = d + 3 * n;
+      const float norm = std::max(std::sqrt(dn[0] * dn[0] + dn[1] * dn[1] + dn[2] * dn[2]), kNormFloor);
+      const float x = dn[0] / norm, y = dn[1] / norm, z = dn[2] / norm;
+      sh_basis(static_cast<int>(degree), x, y, z, b);
+      std::fill(v_b, v_b + 16, 0.0f);
+      for (int64_t c = 0; c < C; ++c) {
+        float sum = 0;
+        for (int64_t k = 0; k < used; ++k) sum += b[k] * sh[(n * K + k) * C + c];
+        const float gc = sum + kRgbOffset >= 0.0f ? g[n * C + c] : 0.0f;  // clamp_min passes ties (PyTorch)
+        for (int64_t k = 0; k < used; ++k) {
+          vsh[(n * K + k) * C + c] = b[k] * gc;
+          v_b[k] += sh[(n * K + k) * C + c] * gc;
+        }
+      }
+      float gx, gy, gz;
+      sh_basis_backward(static_cast<int>(degree), x, y, z, v_b, gx, gy, gz);
+      const float along = x * gx + y * gy + z * gz;  // through the normalisation d / |d|
+      vd[3 * n] = (gx - x * along) / norm;
+      vd[3 * n + 1] = (gy - y * along) / norm;
+      vd[3 * n + 2] = (gz - z * along) / norm;
+    }
+  });
+  return {v_coeffs, v_dirs};
+}
