@@ -73,7 +73,12 @@ def joint_transforms(rig: BodyRig, pose: Tensor, transl: Tensor, scale: float) -
 def polar_rotation(matrices: Tensor) -> Tensor:
     """[N, 3, 3] invertible matrices with positive determinant -> their closest rotations [N, 3, 3] (the
     orthogonal polar factor), by Newton's iteration X <- (X + X^-T) / 2 from X / det(X)^(1/3), which
-    converges quadratically; X^-T is the cofactor matrix over the determinant. No gradient."""
+    converges quadratically; X^-T is the cofactor matrix over the determinant. No gradient. By the C++ kernel
+    for float32 CPU tensors where it builds (the same iteration)."""
+    from glimpse.render.composite_cpu import extension, kernel_applies
+
+    if kernel_applies(matrices):
+        return extension().polar_rotations(matrices.detach().contiguous())
     with torch.no_grad():
         x = matrices / torch.linalg.det(matrices).abs().clamp(min=DET_FLOOR).pow(1.0 / 3.0)[:, None, None]
         for _ in range(POLAR_ITERATIONS):

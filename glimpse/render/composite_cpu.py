@@ -33,6 +33,7 @@ from glimpse.render.binning import TileBins
 log = logging.getLogger("glimpse")
 CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "preprocess_cpu.cpp", "pose_cpu.cpp")]
+HEADERS = [CSRC / "sh_basis.h"]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).
@@ -64,7 +65,7 @@ def _build(flags: list[str]) -> ModuleType:
     from torch.utils.cpp_extension import load
 
     digest = hashlib.sha256(" ".join(flags).encode() + torch.__version__.encode())
-    for source in SOURCES:
+    for source in SOURCES + HEADERS:
         digest.update(source.read_bytes())
     key = digest.hexdigest()[:12]
     name = f"glimpse_composite_cpu_{key}"
@@ -73,12 +74,13 @@ def _build(flags: list[str]) -> ModuleType:
                         hint=f"If it hangs, stop it; or wait longer with {BUILD_WAIT_ENV}=<seconds>."):
         (root / "lock").unlink(missing_ok=True)  # torch's own build marker, left behind by a killed build
         sources = []
-        for source in SOURCES:  # one path for every checkout: ninja then sees nothing to rebuild
+        for source in SOURCES + HEADERS:  # one path for every checkout: ninja then sees nothing to rebuild
             copy = root / "src" / source.name
             if not copy.is_file() or copy.read_bytes() != source.read_bytes():
                 copy.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(source, copy)
-            sources.append(str(copy))
+            if source in SOURCES:
+                sources.append(str(copy))
         if not (root / f"{name}.so").exists():
             log.info("building the C++ rasterizer (%s), once: about a minute", " ".join(flags))
         return load(name=name, sources=sources, extra_cflags=flags, extra_ldflags=["-fopenmp"],

@@ -5,8 +5,9 @@
 // integer coordinates); skip when power > 0 or alpha = min(0.999, o exp(power)) < 1/255;
 // front to back, a pixel stops before its transmittance would reach 1e-4.
 //
-// Tiles are shared among threads dynamically (busy tiles do not hold up a thread that has finished
-// its share). Within a tile, Gaussians are taken one by one (outer loop); for each row of the
+// The forward shares tiles among threads dynamically (busy tiles do not hold up a thread that has
+// finished its share); the backward deals them round-robin, so that its per-thread sums are the same
+// on every run. Within a tile, Gaussians are taken one by one (outer loop); for each row of the
 // Gaussian's box, all 16 pixels of the tile's row are computed branch-free in SIMD lanes, pixels
 // outside the box masked off (a fixed trip count: no scalar epilogue), then each channel is
 // accumulated in a second vector loop over the same row (per-tile state is stored channel-major).
@@ -248,7 +249,8 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
     // one Gaussian's gradients, per lane ([j * kLanes + i], j as in the output: mean, conic, opacity, features),
     // summed over lanes once per Gaussian and tile
     float* __restrict lanes = lane_grads.data();
-#pragma omp for schedule(dynamic, 1)
+// tiles dealt round-robin: balanced, and each thread's sums (hence the gradients) the same on every run
+#pragma omp for schedule(static, 1)
     for (int64_t k = 0; k < tiles; ++k) {
       const TileRect r = tile_rect(in, k);
       int max_last = 0;
@@ -442,6 +444,7 @@ std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, tor
 std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joint_transforms,
                                         torch::Tensor canonical_inverse, torch::Tensor means, torch::Tensor covariances,
                                         torch::Tensor sh, int64_t degree, torch::Tensor camera_centre);
+torch::Tensor polar_rotations(torch::Tensor matrices);
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
@@ -454,4 +457,5 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
   m.def("pose_forward", &pose_forward, "Posing a frozen person's Gaussians, forward (CPU)");
+  m.def("polar_rotations", &polar_rotations, "Closest rotations of 3x3 matrices, Newton's polar iteration (CPU)");
 }

@@ -12,21 +12,16 @@
 #include <cmath>
 #include <vector>
 
+#include "sh_basis.h"
+
 namespace {
+
+using namespace glimpse_sh;
 
 constexpr int kPolarIterations = 6;    // person.py POLAR_ITERATIONS
 constexpr float kDetFloor = 1e-12f;    // person.py DET_FLOOR
 constexpr float kNormFloor = 1e-12f;   // F.normalize's eps in sh.py
-constexpr float kRgbOffset = 0.5f;     // sh.py RGB_OFFSET
 constexpr int64_t kGrain = 1024;
-
-// sh.py C0..C3
-constexpr float C0 = 0.28209479177387814f;
-constexpr float C1 = 0.4886025119029199f;
-constexpr float C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f, -1.0925484305920792f,
-                         0.5462742152960396f};
-constexpr float C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f, 0.3731763325901154f,
-                         -0.4570457994644658f, 1.445305721320277f, -0.5900435899266435f};
 
 inline float det3(const float* m) {
   return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
@@ -46,31 +41,6 @@ inline void polar(const float* m, float* x) {
     const float det = std::max(r0[0] * cof[0] + r0[1] * cof[1] + r0[2] * cof[2], kDetFloor);
     for (int k = 0; k < 9; ++k) x[k] = 0.5f * (x[k] + cof[k] / det);
   }
-}
-
-// The 3DGS SH basis at unit direction (x, y, z), up to `degree`; returns the number of terms.
-inline int sh_basis(int degree, float x, float y, float z, float* out) {
-  out[0] = C0;
-  if (degree < 1) return 1;
-  out[1] = -C1 * y;
-  out[2] = C1 * z;
-  out[3] = -C1 * x;
-  if (degree < 2) return 4;
-  const float xx = x * x, yy = y * y, zz = z * z;
-  out[4] = C2[0] * x * y;
-  out[5] = C2[1] * y * z;
-  out[6] = C2[2] * (2.0f * zz - xx - yy);
-  out[7] = C2[3] * x * z;
-  out[8] = C2[4] * (xx - yy);
-  if (degree < 3) return 9;
-  out[9] = C3[0] * y * (3.0f * xx - yy);
-  out[10] = C3[1] * x * y * z;
-  out[11] = C3[2] * y * (4.0f * zz - xx - yy);
-  out[12] = C3[3] * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
-  out[13] = C3[4] * x * (4.0f * zz - xx - yy);
-  out[14] = C3[5] * z * (xx - yy);
-  out[15] = C3[6] * x * (xx - 3.0f * yy);
-  return 16;
 }
 
 }  // namespace
@@ -145,7 +115,8 @@ std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joi
       }
       const float norm = std::max(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), kNormFloor);
       float basis[16];
-      const int terms = sh_basis(static_cast<int>(degree), d[0] / norm, d[1] / norm, d[2] / norm, basis);
+      const int terms = static_cast<int>((degree + 1) * (degree + 1));
+      sh_basis(static_cast<int>(degree), d[0] / norm, d[1] / norm, d[2] / norm, basis);
       const float* s = S + n * K * 3;
       for (int ch = 0; ch < 3; ++ch) {
         float v = 0.0f;
@@ -155,4 +126,18 @@ std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joi
     }
   });
   return {out_means, out_cov, out_rgb};
+}
+
+// matrices [N, 3, 3] (positive determinant) -> their closest rotations [N, 3, 3] (person.polar_rotation).
+torch::Tensor polar_rotations(torch::Tensor matrices) {
+  TORCH_CHECK(matrices.dtype() == torch::kFloat32 && matrices.is_contiguous() && matrices.device().is_cpu(),
+              "polar_rotations: contiguous float32 CPU tensor expected");
+  const int64_t N = matrices.size(0);
+  auto out = torch::empty_like(matrices);
+  const float* m = matrices.data_ptr<float>();
+  float* x = out.data_ptr<float>();
+  at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
+    for (int64_t n = begin; n < end; ++n) polar(m + 9 * n, x + 9 * n);
+  });
+  return out;
 }
