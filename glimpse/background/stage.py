@@ -179,6 +179,7 @@ def _write_views(model: GaussianModel, views: list[TrainingView], render: Render
 def _training_doc(training: TrainingLog, config: BackgroundConfig, count: int, unseen: int, pruned: int) -> dict:
     return {"iterations": config.total_iterations, "resumed_from_iteration": training.resumed_from,
             "iterations_per_s": round(training.iterations_per_s, 3), "training_s": round(training.seconds, 2),
+            "phase_seconds": training.phase_seconds,
             "gaussians": count, "gaussians_never_seen": unseen, "never_seen_pruned": pruned,
             "densify_events": training.densify_events, "loss_history": training.losses}
 

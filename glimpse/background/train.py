@@ -75,7 +75,7 @@ class BackgroundTrainer(GaussianTrainer):
 
     def __init__(self, model: GaussianModel, views: list[TrainingView], config: BackgroundConfig,
                  render: RenderConfig, sphere: Sphere | None, seed: int, checkpoint: Path, key: str):
-        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key)
+        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key, model.means.device)
         self.model, self.views, self.config, self.render = model, views, config, render
         self.sphere, self.seed = sphere, seed
         self.extent = scene_extent([v.camera for v in views], model.means.detach())
@@ -110,22 +110,30 @@ class BackgroundTrainer(GaussianTrainer):
     def _iteration(self) -> dict[str, float]:
         step, config = self.step + 1, self.config
         set_position_lr(self.optimizer, self.rates, self.extent, step)
-        view = self._view(self.views, self.seed, step)
+        with self.phases("data"):
+            view = self._view(self.views, self.seed, step)
+            target, background = view.target(), view.background
         degree = min((step - 1) // config.scaled_sh_degree_every, self.render.sh_degree)
-        out = rasterize(view.camera, **self.model.render_inputs(degree),
-                        background=training_background(config.background_colour, self.seed, step, view.image.device),
-                        settings=self.render)
-        out.means2d.retain_grad()
-        loss = photometric_loss(config, out.rgb, view.target(), view.background)
-        total = loss + sphere_regulariser(self.model.means, self.sphere, config.sphere_reg_weight) if self.sphere else loss
-        total.backward()
+        with self.phases("render"):
+            out = rasterize(view.camera, **self.model.render_inputs(degree),
+                            background=training_background(config.background_colour, self.seed, step, target.device),
+                            settings=self.render)
+            out.means2d.retain_grad()
+        with self.phases("loss"):
+            loss = photometric_loss(config, out.rgb, target, background)
+            total = loss + sphere_regulariser(self.model.means, self.sphere, config.sphere_reg_weight) if self.sphere else loss
+        with self.phases("backward"):
+            total.backward()
         with torch.no_grad():
-            if out.means2d.grad is not None:
-                self.strategy.observe(self.stats, out.means2d.grad, out.radii, view.camera.width, view.camera.height,
-                                      step)
-            self.optimizer.step()
-            self.optimizer.zero_grad(set_to_none=True)
-            self._density_control(step)
+            with self.phases("densify"):
+                if out.means2d.grad is not None:
+                    self.strategy.observe(self.stats, out.means2d.grad, out.radii, view.camera.width,
+                                          view.camera.height, step)
+            with self.phases("optimiser"):
+                self.optimizer.step()
+                self.optimizer.zero_grad(set_to_none=True)
+            with self.phases("densify"):
+                self._density_control(step)
         self.step = step
         return {"total": float(loss.detach())}
 

@@ -16,8 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence, TypeVar
 
+import torch
 from tqdm import tqdm
 
+from glimpse.gaussians.phases import PhaseTimer
 from glimpse.gaussians.training import view_for_step
 from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
 
@@ -30,13 +32,15 @@ LOSS_HISTORY_EVERY = 10  # iterations between entries of the loss history in the
 @dataclass
 class TrainingLog:
     """What a run did: its loss history (an entry every LOSS_HISTORY_EVERY iterations and at the last, in the
-    trainer's own form), densification events, where it resumed from and how long this process took."""
+    trainer's own form), densification events, where it resumed from, how long this process took and where
+    that time went (seconds per phase of the iterations, glimpse.gaussians.phases)."""
 
     losses: list = field(default_factory=list)
     densify_events: list[dict] = field(default_factory=list)
     resumed_from: int = 0
     iterations_run: int = 0  # in this process (not counting those before a resume)
     seconds: float = 0.0
+    phase_seconds: dict[str, float] = field(default_factory=dict)
 
     @property
     def iterations_per_s(self) -> float:
@@ -50,8 +54,10 @@ class GaussianTrainer(ABC):
 
     name: str
 
-    def __init__(self, total_iterations: int, checkpoint_every: int, checkpoint: Path, key: str):
+    def __init__(self, total_iterations: int, checkpoint_every: int, checkpoint: Path, key: str,
+                 device: torch.device | None = None):
         self.total_iterations, self.checkpoint_every = total_iterations, checkpoint_every
+        self.phases = PhaseTimer(device)  # _iteration marks its phases: `with self.phases("render"): ...`
         self.checkpoint, self.key = checkpoint, key
         self.log = TrainingLog()
         self.step = 0  # iterations done
@@ -105,7 +111,8 @@ class GaussianTrainer(ABC):
         started = time.perf_counter()
         bar = tqdm(total=total, initial=self.step, desc=self.name, unit="it", disable=None, leave=False)
         while self.step < total:
-            values = self._iteration()
+            with self.phases.iteration():
+                values = self._iteration()
             if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
                 self.log.losses.append(self._history_entry(values))
             bar.update(1)
@@ -119,4 +126,5 @@ class GaussianTrainer(ABC):
             self.log.iterations_run += 1
         bar.close()
         self.log.seconds = time.perf_counter() - started
+        self.log.phase_seconds = {name: round(s, 3) for name, s in self.phases.seconds().items()}
         return self.log

@@ -28,6 +28,7 @@ from glimpse.body.skinning import (
     deform_gaussians, invert_affine,
 )
 from glimpse.gaussians.model import GaussianModel, knn_scales
+from glimpse.humans.posing_cpu import pose_gaussians_cpu
 from glimpse.render.projection import quat_scale_to_covariance
 from glimpse.render.sh import num_sh_coeffs, rotate_view_dirs, sh_to_rgb
 
@@ -194,9 +195,16 @@ class PersonGaussians(nn.Module):
         """The Gaussians posed by the joints' skinning ``transforms [24, 4, 4]`` (any pose: a frame's, a new one
         from joint_transforms, or the canonical rig.canonical_transforms), seen from ``camera_centre [3]`` in
         the frame those transforms map into; differentiable in every Gaussian parameter."""
+        from glimpse.render.composite_cpu import kernel_applies
+
         degree = min(sh_degree, self.model.sh_degree)
-        blended = canonical_to_posed(self.grid.lookup(self.model.means), transforms, self.rig.canonical_transforms)
         covariances = quat_scale_to_covariance(self.model.quats, self.model.scales())
+        if kernel_applies(self.model.means, transforms, self.grid.weights):  # the same maths in one C++ pass
+            means, covariances, dirs = pose_gaussians_cpu(self.model.means, covariances, transforms, self.grid,
+                                                          self.rig.canonical_transforms, camera_centre)
+            colours = sh_to_rgb(degree, self.model.sh()[:, : num_sh_coeffs(degree)], dirs)
+            return PosedGaussians(means, covariances, self.model.opacities(), colours)
+        blended = canonical_to_posed(self.grid.lookup(self.model.means), transforms, self.rig.canonical_transforms)
         means, covariances = deform_gaussians(self.model.means, covariances, blended)
         colours = view_colours(blended, means, camera_centre, degree, self.model.sh())
         return PosedGaussians(means, covariances, self.model.opacities(), colours)

@@ -198,7 +198,7 @@ def _report(training: TrainingLog, config: JointConfig, people: list[PersonGauss
             frames_doc: dict, prior: str) -> dict:
     return {"format": REPORT_FORMAT, "prior": prior, "iterations": config.total_iterations,
             "resumed_from_iteration": training.resumed_from, "iterations_per_s": round(training.iterations_per_s, 3),
-            "training_s": round(training.seconds, 2),
+            "training_s": round(training.seconds, 2), "phase_seconds": training.phase_seconds,
             "people": {p.pid: {"gaussians_initial": initial_counts[p.pid], "gaussians": len(p.model),
                                "frames": len(p.body.frame_ids),
                                "pose_offset_mean_deg": round(math.degrees(p.pose_offsets.detach().abs().mean().item()),

@@ -93,7 +93,7 @@ class JointTrainer(GaussianTrainer):
     def __init__(self, background: GaussianModel, people: list[PersonGaussians], views: list[JointView],
                  config: JointConfig, render: RenderConfig, prior: UnseenPrior, lpips_module: LPIPS | None,
                  seed: int, checkpoint: Path, key: str):
-        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key)
+        super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key, background.means.device)
         self.background, self.people, self.views, self.config, self.render = background, people, views, config, render
         self.prior, self.lpips, self.seed = prior, lpips_module, seed
         self.background_degree = min(background.sh_degree, render.sh_degree)
@@ -158,26 +158,35 @@ class JointTrainer(GaussianTrainer):
         set_position_lr(self.background_optimizer, self.background_rates, self.extent, step)
         for optimizer in self.person_optimizers:
             set_position_lr(optimizer, self.human_rates, HUMAN_EXTENT, step)
-        view = self._view(self.views, self.seed, step)
+        with self.phases("data"):
+            view = self._view(self.views, self.seed, step)
+            view.pixels(view.frame_id)  # read (or take from the cache) the frame and its masks
         human_degree = config.human_sh_degree(step, self.render.sh_degree)
-        gaussians = frame_gaussians(view.camera, view.frame_id, self.people, human_degree, self.background,
-                                    self.background_degree)
-        colour = training_background(config.background_colour, self.seed, step, view.image.device)
-        out = render_frame(view.camera, gaussians, len(self.people), self.render, colour)
-        out.means2d.retain_grad()
+        with self.phases("pose"):
+            gaussians = frame_gaussians(view.camera, view.frame_id, self.people, human_degree, self.background,
+                                        self.background_degree)
+        with self.phases("render"):
+            colour = training_background(config.background_colour, self.seed, step, view.image.device)
+            out = render_frame(view.camera, gaussians, len(self.people), self.render, colour)
+            out.means2d.retain_grad()
         present = list(gaussians.rows)
-        total, terms = self._loss(step, view, out, present)
-        total.backward()
+        with self.phases("loss"):
+            total, terms = self._loss(step, view, out, present)
+        with self.phases("backward"):
+            total.backward()
         fixed = config.centres_fixed_at(step)
         with torch.no_grad():
-            weight = self.prior.recon_weight(step)  # densification reads gradients of the unweighted loss
-            for k, rows in gaussians.rows.items():
-                if out.means2d.grad is not None:
-                    self.strategy.observe(self.stats[k], out.means2d.grad[rows] / weight, out.radii[rows],
-                                          view.camera.width, view.camera.height, step)
-            self._step(self._optimizers(), fixed)
-        separate = self._separate_steps(step, fixed)
-        with torch.no_grad():
+            with self.phases("densify"):
+                weight = self.prior.recon_weight(step)  # densification reads gradients of the unweighted loss
+                for k, rows in gaussians.rows.items():
+                    if out.means2d.grad is not None:
+                        self.strategy.observe(self.stats[k], out.means2d.grad[rows] / weight, out.radii[rows],
+                                              view.camera.width, view.camera.height, step)
+            with self.phases("optimiser"):
+                self._step(self._optimizers(), fixed)
+        with self.phases("prior"):
+            separate = self._separate_steps(step, fixed)
+        with torch.no_grad(), self.phases("densify"):
             self._density_control(step, view.camera.height)
         self.step = step
         values = {name: float(value.detach()) for name, value in terms.items()}

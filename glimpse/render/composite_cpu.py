@@ -1,5 +1,5 @@
-"""The C++ kernels (csrc/: tile binning and compositing, projection, covariances and SH colours, posing a
-frozen person): built on first use, cached.
+"""The C++ kernels (csrc/: tile binning and compositing, projection, covariances and SH colours, posing
+people for training and frozen ones for rendering): built on first use, cached.
 
 The build cache is keyed by the source, the flags and torch's version, under
 $GLIMPSE_CACHE (default ~/.cache/glimpse). The sources are copied into it and built from
@@ -32,8 +32,9 @@ from glimpse.render.binning import TileBins
 
 log = logging.getLogger("glimpse")
 CSRC = Path(__file__).resolve().parent / "csrc"
-SOURCES = [CSRC / name for name in ("composite_cpu.cpp", "project_cpu.cpp", "preprocess_cpu.cpp", "pose_cpu.cpp")]
-HEADERS = [CSRC / "sh_basis.h"]
+SOURCES = [CSRC / name for name in (
+    "composite_cpu.cpp", "project_cpu.cpp", "preprocess_cpu.cpp", "pose_cpu.cpp", "skinning_cpu.cpp")]
+HEADERS = [CSRC / "sh_basis.h", CSRC / "polar.h"]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).

@@ -446,6 +446,15 @@ std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joi
                                         torch::Tensor sh, int64_t degree, torch::Tensor camera_centre);
 torch::Tensor polar_rotations(torch::Tensor matrices);
 
+// skinning_cpu.cpp
+std::vector<torch::Tensor> skin_forward(torch::Tensor means, torch::Tensor covariances, torch::Tensor grid,
+                                        torch::Tensor bounds, torch::Tensor posed, torch::Tensor canonical,
+                                        torch::Tensor centre);
+std::vector<torch::Tensor> skin_backward(torch::Tensor means, torch::Tensor covariances, torch::Tensor grid,
+                                         torch::Tensor bounds, torch::Tensor posed, torch::Tensor canonical,
+                                         torch::Tensor centre, torch::Tensor v_means, torch::Tensor v_cov,
+                                         torch::Tensor v_dirs);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
   m.def("project_backward", &project_backward, "EWA projection, backward (CPU)");
@@ -457,5 +466,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
   m.def("pose_forward", &pose_forward, "Posing a frozen person's Gaussians, forward (CPU)");
+  m.def("skin_forward", &skin_forward, "Posing canonical Gaussians for training, forward (CPU)");
+  m.def("skin_backward", &skin_backward, "Posing canonical Gaussians for training, backward (CPU)");
   m.def("polar_rotations", &polar_rotations, "Closest rotations of 3x3 matrices, Newton's polar iteration (CPU)");
 }
