@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import torch
@@ -77,6 +78,12 @@ class SkinWeightGrid:
     def resolution(self) -> int:
         return int(self.weights.shape[-1])
 
+    @cached_property
+    def joints_last(self) -> Tensor:
+        """[R, R, R, J] the weights with the joints last and contiguous (the C++ posing kernel's layout), made
+        once."""
+        return self.weights.permute(1, 2, 3, 0).float().contiguous()
+
     def lookup(self, points: Tensor) -> Tensor:
         """points [N, 3] -> skin weights [N, J] by trilinear interpolation; points outside the cube
         take the weights of the nearest face of the cube (callers prune them: see ``inside``)."""
@@ -118,7 +125,7 @@ def bake_skin_weight_grid(vertices: np.ndarray, vertex_weights: np.ndarray, reso
     z, y, x = np.meshgrid(axis + centre[2], axis + centre[1], axis + centre[0], indexing="ij")
     corners = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
     weights = idw_skin_weights(corners, vertices, vertex_weights, k, power)  # [R^3, J]
-    grid = weights.T.reshape(-1, resolution, resolution, resolution)
+    grid = np.ascontiguousarray(weights.T.reshape(-1, resolution, resolution, resolution))  # [J, z, y, x] in memory
     return SkinWeightGrid(torch.as_tensor(grid, dtype=dtype), torch.as_tensor(centre - half, dtype=dtype),
                           torch.as_tensor(centre + half, dtype=dtype))
 

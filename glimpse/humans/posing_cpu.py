@@ -18,7 +18,7 @@ class _SkinCPU(torch.autograd.Function):
         from glimpse.render.composite_cpu import extension
 
         tensors = [t.detach().float().contiguous() for t in (
-            means, covariances, grid.weights, torch.stack([grid.bounds_min, grid.bounds_max]), posed, canonical,
+            means, covariances, grid.joints_last, torch.stack([grid.bounds_min, grid.bounds_max]), posed, canonical,
             centre)]
         ctx.save_for_backward(*tensors)
         return tuple(extension().skin_forward(*tensors))

@@ -7,12 +7,14 @@
 //
 // The forward shares tiles among threads dynamically (busy tiles do not hold up a thread that has
 // finished its share); the backward deals them round-robin, so that its per-thread sums are the same
-// on every run. Within a tile, Gaussians are taken one by one (outer loop); for each row of the
-// Gaussian's box, all 16 pixels of the tile's row are computed branch-free in SIMD lanes, pixels
-// outside the box masked off (a fixed trip count: no scalar epilogue), then each channel is
-// accumulated in a second vector loop over the same row (per-tile state is stored channel-major).
-// The backward walks each tile back to front the same way, keeps per-thread gradient buffers (no
-// atomics) and sums them.
+// on every run. Within a tile, Gaussians are taken one by one (outer loop); each row of the
+// Gaussian's box is computed in groups of 8 pixels (one AVX2 vector: a fixed trip count, no scalar
+// epilogue), pixels outside the box masked off, branch-free, then each channel is accumulated in a
+// second vector loop over the same pixels (per-tile state is stored channel-major). State is updated
+// by arithmetic with 0/1 factors rather than by selecting the old value, which compiles to masked
+// stores that stall the next Gaussian's loads. The backward walks each tile back to front the same
+// way, sums each Gaussian's gradients per lane (one horizontal sum per Gaussian and tile), keeps
+// per-thread gradient buffers (no atomics) and sums them in parallel.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 #include <omp.h>

@@ -19,7 +19,8 @@
 
 namespace {
 
-// The weight grid: J channels of R^3 voxels, [J, z, y, x], spanning the cube [lo, hi].
+// The weight grid, joints last: [z, y, x, J] (a lookup reads 8 runs of J floats, not 8 x J scattered ones),
+// spanning the cube [lo, hi].
 struct Grid {
   const float* values;
   int64_t J, R;
@@ -41,7 +42,7 @@ inline void grid_lookup(const Grid& g, const float* p, float* w, float* dw) {
     base[a] = std::min(static_cast<int64_t>(std::floor(x)), g.R - 2);
     frac[a] = x - static_cast<float>(base[a]);
   }
-  const int64_t stride_y = g.R, stride_z = g.R * g.R, voxels = g.R * g.R * g.R;
+  const int64_t stride_y = g.R, stride_z = g.R * g.R;
   std::fill(w, w + g.J, 0.0f);
   if (dw != nullptr) std::fill(dw, dw + 3 * g.J, 0.0f);
   for (int corner = 0; corner < 8; ++corner) {
@@ -51,9 +52,9 @@ inline void grid_lookup(const Grid& g, const float* p, float* w, float* dw) {
     const float sx = cx ? 1.0f : -1.0f, sy = cy ? 1.0f : -1.0f, sz = cz ? 1.0f : -1.0f;
     const float weight = fx * fy * fz;
     const float d[3] = {sx * fy * fz * scale[0], fx * sy * fz * scale[1], fx * fy * sz * scale[2]};
-    const int64_t offset = (base[2] + cz) * stride_z + (base[1] + cy) * stride_y + base[0] + cx;
+    const float* values = g.values + ((base[2] + cz) * stride_z + (base[1] + cy) * stride_y + base[0] + cx) * g.J;
     for (int64_t j = 0; j < g.J; ++j) {
-      const float value = g.values[j * voxels + offset];
+      const float value = values[j];
       w[j] += weight * value;
       if (dw != nullptr)
         for (int a = 0; a < 3; ++a) dw[3 * j + a] += d[a] * value;
@@ -121,9 +122,9 @@ Inputs make_inputs(const torch::Tensor& means, const torch::Tensor& covariances,
   for (const auto* t : {&means, &covariances, &grid, &bounds, &posed, &canonical, &centre})
     TORCH_CHECK(t->dtype() == torch::kFloat32 && t->is_contiguous() && t->device().is_cpu(),
                 "skinning_cpu: contiguous float32 CPU tensors expected");
-  TORCH_CHECK(grid.dim() == 4 && grid.size(0) <= 64 && grid.size(1) >= 2, "skinning_cpu: grid [J <= 64, R, R, R] expected");
+  TORCH_CHECK(grid.dim() == 4 && grid.size(3) <= 64 && grid.size(0) >= 2, "skinning_cpu: grid [R, R, R, J <= 64] expected");
   Inputs in{means.data_ptr<float>(), covariances.data_ptr<float>(), posed.data_ptr<float>(),
-            canonical.data_ptr<float>(), centre.data_ptr<float>(), {grid.data_ptr<float>(), grid.size(0), grid.size(1)},
+            canonical.data_ptr<float>(), centre.data_ptr<float>(), {grid.data_ptr<float>(), grid.size(3), grid.size(0)},
             means.size(0)};
   for (int a = 0; a < 3; ++a) in.grid.lo[a] = bounds.data_ptr<float>()[a], in.grid.hi[a] = bounds.data_ptr<float>()[3 + a];
   return in;
@@ -131,7 +132,7 @@ Inputs make_inputs(const torch::Tensor& means, const torch::Tensor& covariances,
 
 }  // namespace
 
-// means [N, 3], covariances [N, 3, 3] (canonical); grid [J, R, R, R]; bounds [2, 3] (the cube's corners);
+// means [N, 3], covariances [N, 3, 3] (canonical); grid [R, R, R, J] (joints last); bounds [2, 3] (the cube's corners);
 // posed, canonical [J, 4, 4] (the frame's and the canonical joint transforms); centre [3] (camera, world).
 // Returns posed means [N, 3], posed covariances [N, 3, 3] and view directions in the canonical frame [N, 3].
 std::vector<torch::Tensor> skin_forward(torch::Tensor means, torch::Tensor covariances, torch::Tensor grid,
