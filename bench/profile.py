@@ -76,7 +76,7 @@ def main() -> int:
         if not (scene / "scene.yaml").is_file():
             make_scene(SCENARIO, scene, args.size, seed=SEED)
         wall_s = run_pipeline(scene, out, args.params)
-        run_dir = out / scene.name
+        run_dir = next(folder for folder in out.iterdir() if (folder / STAGES[0].name).is_dir())  # OUT/<scene name>
         print(f"demo scene ({args.size}), default parameters{' + ' + args.params if args.params else ''}, "
               f"{os.cpu_count()} CPUs\n")
         print(stage_table(run_dir, wall_s))

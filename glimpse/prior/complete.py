@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.sparse import coo_matrix, diags
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import cg, spsolve
 
 MIN_ANCHOR = 1e-6  # smallest pull towards the anchors (keeps vertices cut off from every known one defined)
+CG_RTOL = 1e-10  # conjugate gradients stop at this residual, relative to the right-hand side
+CG_MAX_ITERATIONS = 2000  # beyond this many steps a column is solved directly
 
 
 def body_graph(edges: np.ndarray, mirror: np.ndarray, mirror_weight: float, vertex_count: int) -> coo_matrix:
@@ -105,9 +107,21 @@ def screened_fill(values: np.ndarray, confidence: np.ndarray, graph, anchors: np
     free = ~held
     data = np.where(has_data, np.where(held, 0.0, confidence), 0.0)[free]
     pull = np.where(has_data[free], 0.0, max(anchor_weight, MIN_ANCHOR))
-    system = laplacian[free][:, free] + diags(data + pull, format="csr")
-    right = (-(laplacian[free][:, held] @ values[held]) + data[:, None] * values[free]
-             + pull[:, None] * anchors[free])
+    right = data[:, None] * values[free] + pull[:, None] * anchors[free]
+    if held.any():  # the held vertices enter as boundary values
+        right = right - laplacian[free][:, held] @ values[held]
+        laplacian = laplacian[free][:, free]
+    system = laplacian + diags(data + pull, format="csr")
     filled = values.copy()
-    filled[free] = spsolve(system.tocsc(), right).reshape(int(free.sum()), -1)
+    filled[free] = _solve(system.tocsr(), right.reshape(int(free.sum()), -1))
     return filled
+
+
+def _solve(system, right: np.ndarray) -> np.ndarray:
+    """system [n, n] (symmetric positive definite) x = right [n, C]: conjugate gradients per column (a few
+    times faster than a direct solve on a body's graph), a direct solve for a column they do not settle."""
+    columns = []
+    for column in right.T:
+        solution, info = cg(system, column, rtol=CG_RTOL, atol=0.0, maxiter=CG_MAX_ITERATIONS)
+        columns.append(solution if info == 0 else spsolve(system.tocsc(), column))
+    return np.stack(columns, axis=1)
