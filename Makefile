@@ -19,6 +19,8 @@ TEST_WORKERS ?= 2
 
 # Another defaults file instead of pipeline.yaml (a full copy with your changes).
 PIPELINE_YAML ?=
+# The demo scene's size: small (128x96, the first look) or full (320x240, the next command to try).
+DEMO_SIZE ?= small
 # Seconds to wait when another run holds the run folder (0: stop at once, naming it).
 WAIT ?= 0
 
@@ -53,7 +55,7 @@ STAGES := $(sort $(patsubst stages/%/run.py,%,$(wildcard stages/*/run.py)))
 .PHONY: help venv models ingest all validate test bench demo clean-stage print-dag free-body $(STAGES)
 
 help:
-	@echo "make demo                      set up, generate the demo scene, run the pipeline on it"
+	@echo "make demo [DEMO_SIZE=full]     set up, generate the demo scene, run the pipeline on it"
 	@echo "make all VIDEO=clip.mp4        ingest the video into a scene (OUT/scenes/clip), then run every stage"
 	@echo "make ingest VIDEO=clip.mp4 [SCENE=dir]  only the scene: people found, tracked, a preview to check"
 	@echo "make all SCENE=dir             run every stage that is out of date"
@@ -127,4 +129,4 @@ free-body:
 	PYTHONPATH=$(CURDIR) $(TOOLS_VENV)/bin/python tools/make_free_body.py --out glimpse/body/assets/free_body.npz
 
 demo: venv
-	@$(PY) -m glimpse.demo --out "$$OUT"
+	@$(PY) -m glimpse.demo --out "$$OUT" --size "$(DEMO_SIZE)"
