@@ -114,3 +114,24 @@ def test_swapping_a_person_out_restores_the_plain_unet(tmp_path):
         switch.use(None)
         again = float(identity_loss(models, examples, timesteps, noise, config))
     assert personal != plain and again == plain
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_training_in_half_precision_steps_float32_weights_and_stays_finite(tmp_path, dtype):
+    """The GPU runs the models in float16 (diffusion.half_precision): the trained token row and K/V weights
+    stay float32, so Adam's small steps land and nothing turns to NaN; the frozen parts keep their dtype."""
+    models = _models(tmp_path)
+    for part in (models.unet, models.controlnet, models.vae, models.text_encoder):
+        part.to(dtype)
+    identity = new_identity(models, TOKEN)
+    table = models.text_encoder.get_input_embeddings().weight
+    row_before = table[identity.token_id].detach().clone()
+    kv_before = [p.detach().clone() for p in identity.kv_parameters()]
+    assert all(p.dtype == torch.float32 for p in identity.kv_parameters())
+    config = _config(steps=2, learning_rate=1e-4, batch_size=2, background_weight=0.5)
+    losses = train_identity(models, identity, _examples(), config, torch.Generator().manual_seed(0))
+    assert all(torch.isfinite(torch.tensor(losses)))
+    assert table.dtype == dtype and models.unet.dtype == dtype
+    assert torch.isfinite(table).all() and not torch.equal(table[identity.token_id], row_before)
+    for before, after in zip(kv_before, identity.kv_parameters()):
+        assert after.dtype == torch.float32 and torch.isfinite(after).all() and not torch.equal(before, after)

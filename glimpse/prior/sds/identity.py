@@ -27,6 +27,7 @@ from glimpse.prior.sds.guidance import DiffusionModels
 IDENTITY_FORMAT = "glimpse-identity/1"
 INIT_WORD = "person"  # the token's embedding starts as this word's
 EMBEDDING_KEY = "token_embedding"
+TRAINABLE_DTYPE = torch.float32  # what identity training steps, whatever precision the models run in
 CROSS_ATTENTION_SUFFIX = "attn2.processor"  # diffusers' name of a transformer block's cross-attention
 
 
@@ -45,7 +46,9 @@ def add_token(models: DiffusionModels, token: str) -> int:
 
 def custom_processors(unet: nn.Module, device: torch.device) -> dict[str, nn.Module]:
     """Fresh CustomDiffusion processors for every cross-attention layer of ``unet``, their K/V projections
-    copied from the layer's (so the model starts unchanged), keyed by processor name."""
+    copied from the layer's (so the model starts unchanged), keyed by processor name. They are float32 even
+    when the UNet runs in float16: Adam's steps on them would vanish below float16's spacing (and its epsilon
+    is 0 there); the processors cast the text states in and their keys and values back out (diffusers)."""
     from diffusers.models.attention_processor import CustomDiffusionAttnProcessor2_0
 
     processors = {}
@@ -58,7 +61,7 @@ def custom_processors(unet: nn.Module, device: torch.device) -> dict[str, nn.Mod
                                                     cross_attention_dim=layer.to_k.in_features)
         processor.to_k_custom_diffusion.weight.data.copy_(layer.to_k.weight.data)
         processor.to_v_custom_diffusion.weight.data.copy_(layer.to_v.weight.data)
-        processors[name] = processor.to(device=device, dtype=layer.to_k.weight.dtype)
+        processors[name] = processor.to(device=device, dtype=TRAINABLE_DTYPE)
     return processors
 
 

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
-from torch import Tensor
+from torch import Tensor, nn
 
 from glimpse.errors import ConfigError
 from glimpse.prior.sds.guidance import DiffusionModels, add_noise, encode_images, encode_text, text_states
-from glimpse.prior.sds.identity import IdentitySwitch, PersonIdentity
+from glimpse.prior.sds.identity import TRAINABLE_DTYPE, IdentitySwitch, PersonIdentity
 
 
 @dataclass(frozen=True)
@@ -86,15 +86,15 @@ def train_identity(models: DiffusionModels, identity: PersonIdentity, examples: 
     """Train ``identity`` on ``examples`` for ``config.steps`` steps; the loss of every step."""
     switch = IdentitySwitch(models.unet)
     switch.use(identity)
-    table = models.text_encoder.get_input_embeddings().weight
-    kept = table.detach().clone()
-    others = torch.ones(len(table), dtype=torch.bool, device=table.device)
-    others[identity.token_id] = False
+    embedding = models.text_encoder.get_input_embeddings()
+    # the token's row is trained as a float32 copy that the embedding's output takes in (a float16 table
+    # would lose Adam's steps); the other rows never change
+    token_row = nn.Parameter(embedding.weight[identity.token_id].detach().to(TRAINABLE_DTYPE).clone())
+    hook = embedding.register_forward_hook(_with_row(identity.token_id, token_row))
     kv = identity.kv_parameters()
     for parameter in kv:
         parameter.requires_grad_(True)
-    table.requires_grad_(True)
-    optimizer = torch.optim.Adam([table, *kv], lr=config.learning_rate)
+    optimizer = torch.optim.Adam([token_row, *kv], lr=config.learning_rate)
     losses = []
     try:
         for step in range(config.steps):
@@ -108,14 +108,25 @@ def train_identity(models: DiffusionModels, identity: PersonIdentity, examples: 
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
-            with torch.no_grad():
-                table[others] = kept[others]
             losses.append(float(loss.detach()))
             if progress is not None:
                 progress(step, losses[-1])
     finally:
-        table.requires_grad_(False)
+        hook.remove()
+        with torch.no_grad():
+            embedding.weight[identity.token_id] = token_row.to(embedding.weight.dtype)
         for parameter in kv:
             parameter.requires_grad_(False)
         switch.use(None)
     return losses
+
+
+def _with_row(token_id: int, row: Tensor):
+    """A forward hook for the text encoder's token embedding: where the input is ``token_id``, the output is
+    ``row`` (differentiable, cast to the output's dtype)."""
+
+    def hook(module: nn.Module, inputs: tuple, output: Tensor) -> Tensor:
+        at_token = (inputs[0] == token_id)[..., None]
+        return torch.where(at_token, row.to(output.dtype), output) if bool(at_token.any()) else output
+
+    return hook
