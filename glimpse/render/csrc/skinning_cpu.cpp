@@ -19,6 +19,8 @@
 
 namespace {
 
+constexpr int kMaxJoints = 64;  // per-Gaussian weights live on the stack (SMPL: 24)
+
 // The weight grid, joints last: [z, y, x, J] (a lookup reads 8 runs of J floats, not 8 x J scattered ones),
 // spanning the cube [lo, hi].
 struct Grid {
@@ -101,7 +103,7 @@ struct Inputs {
 
 // Everything the forward computes for Gaussian n that the backward needs again.
 struct Posed {
-  float w[64], B[12], D[12], Dinv[12], A[12], mean[3], R[9];
+  float w[kMaxJoints], B[12], D[12], Dinv[12], A[12], mean[3], R[9];
 };
 
 inline void pose_one(const Inputs& in, int64_t n, Posed& s, float* dw) {
@@ -122,7 +124,8 @@ Inputs make_inputs(const torch::Tensor& means, const torch::Tensor& covariances,
   for (const auto* t : {&means, &covariances, &grid, &bounds, &posed, &canonical, &centre})
     TORCH_CHECK(t->dtype() == torch::kFloat32 && t->is_contiguous() && t->device().is_cpu(),
                 "skinning_cpu: contiguous float32 CPU tensors expected");
-  TORCH_CHECK(grid.dim() == 4 && grid.size(3) <= 64 && grid.size(0) >= 2, "skinning_cpu: grid [R, R, R, J <= 64] expected");
+  TORCH_CHECK(grid.dim() == 4 && grid.size(3) <= kMaxJoints && grid.size(0) >= 2,
+              "skinning_cpu: grid [R, R, R, J <= ", kMaxJoints, "] expected");
   Inputs in{means.data_ptr<float>(), covariances.data_ptr<float>(), posed.data_ptr<float>(),
             canonical.data_ptr<float>(), centre.data_ptr<float>(), {grid.data_ptr<float>(), grid.size(3), grid.size(0)},
             means.size(0)};
@@ -215,7 +218,8 @@ std::vector<torch::Tensor> skin_backward(torch::Tensor means, torch::Tensor cova
         }
         gm[3 * n + r] = L[r] * v_mean[0] + L[3 + r] * v_mean[1] + L[6 + r] * v_mean[2];
       }
-      // A = B o Dinv: v_B = [v_AL Dinv_L^T | v_At + v_AL... ], with B's translation reaching A's directly
+      // A = B o Dinv (A_L = B_L Dinv_L, A_t = B_L Dinv_t + B_t): v_B_L = v_A_L Dinv_L^T + v_A_t Dinv_t^T,
+      // v_B_t = v_A_t, v_Dinv_L = B_L^T v_A_L, v_Dinv_t = B_L^T v_A_t
       float vB[12], vDinv[12];
       for (int r = 0; r < 3; ++r) {
         for (int c = 0; c < 3; ++c) {
