@@ -11,12 +11,21 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class AutoScheduleScale:
+    """What a section's ``schedule_scale: auto`` becomes on each device (glimpse.config.resolve_auto_schedules)."""
+
+    cpu: float
+    cuda: float
+
+
+@dataclass(frozen=True)
 class ComputeConfig:
     device: Literal["auto", "cpu", "cuda"]
     threads: int  # CPU threads for torch, OpenMP and COLMAP; 0 = every core
     seed: int
     frame_cache: int  # input frames (image and masks) stages 04 and 06 keep decoded, on the compute device
     frame_read_ahead: int  # frames read ahead of the training loop on a background thread (< frame_cache)
+    auto_schedule_scale: AutoScheduleScale
 
 
 def resolved_threads(config: ComputeConfig) -> int:

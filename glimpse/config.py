@@ -29,6 +29,8 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 PIPELINE_YAML = REPO_ROOT / "pipeline.yaml"
 
 Params = dict[str, dict[str, Any]]  # section name -> key -> value
+AUTO = "auto"
+SCHEDULE_SCALE = "schedule_scale"  # the key, in any section, that scales that section's iteration counts
 
 
 def pipeline_yaml_path() -> Path:
@@ -38,8 +40,10 @@ def pipeline_yaml_path() -> Path:
     return Path(os.environ.get("GLIMPSE_PIPELINE_YAML") or PIPELINE_YAML)
 
 
-def load_pipeline_yaml(path: Path | None = None) -> Params:
-    """Read pipeline.yaml: a mapping of section name -> mapping of parameters."""
+def load_pipeline_yaml(path: Path | None = None, resolve_auto: bool = True) -> Params:
+    """Read pipeline.yaml: a mapping of section name -> mapping of parameters; ``schedule_scale: auto``
+    resolved for this machine (:func:`resolve_auto_schedules`) unless ``resolve_auto`` is False (a caller that
+    merges overrides first, which may change the device, resolves after them)."""
     path = pipeline_yaml_path() if path is None else path
     try:
         data = yaml.safe_load(path.read_text())
@@ -47,7 +51,34 @@ def load_pipeline_yaml(path: Path | None = None) -> Params:
         raise ConfigError(f"{path}: cannot read the pipeline parameters: {exc}") from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise ConfigError(f"{path}: must be a mapping of section name -> mapping of parameters")
+    if resolve_auto:
+        resolve_auto_schedules(data)
     return data
+
+
+def stage_device_kind(device: str) -> str:
+    """"cuda" or "cpu": where stages run for ``compute.device`` (auto: CUDA when torch sees a device)."""
+    if device in ("cpu", "cuda"):
+        return device
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def resolve_auto_schedules(params: Params) -> None:
+    """Replace, in place, every section's ``schedule_scale: auto`` by ``compute.auto_schedule_scale``'s value
+    for the device the stages will run on (the paper's full schedule on CUDA, a tenth on a CPU, by default)."""
+    sections = [name for name, values in params.items() if values.get(SCHEDULE_SCALE) == AUTO]
+    if not sections:
+        return
+    compute = params.get("compute", {})
+    kind = stage_device_kind(str(compute.get("device", AUTO)))
+    scales = compute.get("auto_schedule_scale")
+    if not isinstance(scales, dict) or not isinstance(scales.get(kind), (int, float)):
+        raise ConfigError(f"compute.auto_schedule_scale must give a number for {kind} "
+                          f"({', '.join(sections)} have schedule_scale: auto)")
+    for name in sections:
+        params[name][SCHEDULE_SCALE] = float(scales[kind])
 
 
 def parse_cli_params(text: str) -> list[tuple[str, Any]]:
@@ -124,6 +155,7 @@ def resolve_params(
             apply_override(params, dotted, value, f"{scene_yaml_name} overrides")
     for dotted, value in cli_params:
         apply_override(params, dotted, value, "PARAMS")
+    resolve_auto_schedules(params)
     return params
 
 

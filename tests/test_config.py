@@ -110,11 +110,12 @@ def test_typed_config_is_strict():
 def test_compute_device_resolves_to_cpu_here_and_refuses_a_missing_cuda():
     import torch
 
-    from glimpse.compute import ComputeConfig, resolve_device
+    from glimpse.compute import AutoScheduleScale, ComputeConfig, resolve_device
 
-    assert resolve_device(ComputeConfig("cpu", 1, 0, 32, 4)) == torch.device("cpu")
+    schedules = AutoScheduleScale(0.1, 1.0)
+    assert resolve_device(ComputeConfig("cpu", 1, 0, 32, 4, schedules)) == torch.device("cpu")
     expected = "cuda" if torch.cuda.is_available() else "cpu"
-    assert resolve_device(ComputeConfig("auto", 1, 0, 32, 4)).type == expected
+    assert resolve_device(ComputeConfig("auto", 1, 0, 32, 4, schedules)).type == expected
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="compute.device is cuda"):
-            resolve_device(ComputeConfig("cuda", 1, 0, 32, 4))
+            resolve_device(ComputeConfig("cuda", 1, 0, 32, 4, schedules))

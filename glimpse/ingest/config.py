@@ -61,5 +61,5 @@ def load_ingest_config(cli_params: str = "") -> IngestConfig:
         resolve_params,
     )
 
-    params = resolve_params(load_pipeline_yaml(), None, parse_cli_params(cli_params))
+    params = resolve_params(load_pipeline_yaml(resolve_auto=False), None, parse_cli_params(cli_params))
     return config_from_mapping(IngestConfig, params["ingest"], "pipeline.yaml ingest")

@@ -257,7 +257,8 @@ def resolve_scene_params(scene_root: Path, cli_params: str) -> Params:
     """Every parameter: pipeline.yaml < the scene's overrides < ``cli_params``; ConfigError when one is
     unknown or invalid, or when the scene's body model and ``body`` disagree."""
     scene_yaml = yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}
-    params = resolve_params(load_pipeline_yaml(), scene_yaml.get("overrides") or {}, parse_cli_params(cli_params),
+    params = resolve_params(load_pipeline_yaml(resolve_auto=False), scene_yaml.get("overrides") or {},
+                            parse_cli_params(cli_params),
                             str(scene_root / "scene.yaml"))
     if any(scene_root.glob("humans/*/smpl.npz")):
         body = config_from_mapping(BodyConfig, params["body"], "body")
