@@ -20,7 +20,6 @@ namespace {
 using namespace glimpse_polar;
 using namespace glimpse_sh;
 
-constexpr float kNormFloor = 1e-12f;   // F.normalize's eps in sh.py
 constexpr int64_t kGrain = 1024;
 
 }  // namespace
@@ -93,16 +92,7 @@ std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joi
                             R[2] * d[0] + R[5] * d[1] + R[8] * d[2]};
         d[0] = e[0], d[1] = e[1], d[2] = e[2];
       }
-      const float norm = std::max(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), kNormFloor);
-      float basis[16];
-      const int terms = static_cast<int>((degree + 1) * (degree + 1));
-      sh_basis(static_cast<int>(degree), d[0] / norm, d[1] / norm, d[2] / norm, basis);
-      const float* s = S + n * K * 3;
-      for (int ch = 0; ch < 3; ++ch) {
-        float v = 0.0f;
-        for (int k = 0; k < terms; ++k) v += basis[k] * s[3 * k + ch];
-        orgb[3 * n + ch] = std::max(v + kRgbOffset, 0.0f);
-      }
+      sh_colour(static_cast<int>(degree), d, S + n * K * 3, 3, orgb + 3 * n);
     }
   });
   return {out_means, out_cov, out_rgb};

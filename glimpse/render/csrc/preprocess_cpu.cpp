@@ -16,7 +16,6 @@ namespace {
 
 using namespace glimpse_sh;
 
-constexpr float kNormFloor = 1e-12f;  // torch.nn.functional.normalize's eps
 constexpr int64_t kGrain = 1024;
 
 // Rotation matrix (row-major) of the unit quaternion (w, x, y, z).
@@ -114,17 +113,7 @@ torch::Tensor sh_forward(int64_t degree, torch::Tensor coeffs, torch::Tensor dir
   const float *sh = coeffs.data_ptr<float>(), *d = dirs.data_ptr<float>();
   float* rgb = out.data_ptr<float>();
   at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
-    float b[16];
-    for (int64_t n = begin; n < end; ++n) {
-      const float* dn = d + 3 * n;
-      const float norm = std::max(std::sqrt(dn[0] * dn[0] + dn[1] * dn[1] + dn[2] * dn[2]), kNormFloor);
-      sh_basis(static_cast<int>(degree), dn[0] / norm, dn[1] / norm, dn[2] / norm, b);
-      for (int64_t c = 0; c < C; ++c) {
-        float sum = 0;
-        for (int64_t k = 0; k < used; ++k) sum += b[k] * sh[(n * K + k) * C + c];
-        rgb[n * C + c] = std::max(sum + kRgbOffset, 0.0f);
-      }
-    }
+    for (int64_t n = begin; n < end; ++n) sh_colour(static_cast<int>(degree), d + 3 * n, sh + n * K * C, C, rgb + n * C);
   });
   return out;
 }

@@ -2,6 +2,10 @@
 // derivative, shared by the kernels that colour Gaussians (preprocess_cpu.cpp, pose_cpu.cpp).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
 namespace glimpse_sh {
 
 // 3DGS's SH constants (glimpse/render/sh.py).
@@ -12,6 +16,7 @@ constexpr float C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.3153915652
 constexpr float C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f, 0.3731763325901154f,
                          -0.4570457994644658f, 1.445305721320277f, -0.5900435899266435f};
 constexpr float kRgbOffset = 0.5f;  // sh.py RGB_OFFSET
+constexpr float kNormFloor = 1e-12f;  // torch.nn.functional.normalize's eps (sh.py normalises directions)
 
 // The SH basis up to `degree` at the unit direction (x, y, z): K = (degree + 1)^2 values.
 inline void sh_basis(int degree, float x, float y, float z, float* b) {
@@ -48,6 +53,21 @@ inline void sh_basis_backward(int degree, float x, float y, float z, const float
         6 * C3[6] * x * y * v_b[15];
   gz += C3[1] * x * y * v_b[10] + 8 * C3[2] * y * z * v_b[11] + C3[3] * (6 * zz - 3 * xx - 3 * yy) * v_b[12] +
         8 * C3[4] * x * z * v_b[13] + C3[5] * (xx - yy) * v_b[14];
+}
+
+
+// The colour max(sum_k Y_k(dir / |dir|) coeffs[k * channels + c] + 0.5, 0) seen along ``dir`` (any length),
+// from one Gaussian's coefficients [K >= (degree + 1)^2, channels] -> rgb [channels] (sh.py sh_to_rgb).
+inline void sh_colour(int degree, const float* dir, const float* coeffs, int64_t channels, float* rgb) {
+  const float norm = std::max(std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]), kNormFloor);
+  float b[16];
+  sh_basis(degree, dir[0] / norm, dir[1] / norm, dir[2] / norm, b);
+  const int terms = (degree + 1) * (degree + 1);
+  for (int64_t c = 0; c < channels; ++c) {
+    float sum = 0.0f;
+    for (int k = 0; k < terms; ++k) sum += b[k] * coeffs[k * channels + c];
+    rgb[c] = std::max(sum + kRgbOffset, 0.0f);
+  }
 }
 
 }  // namespace glimpse_sh
