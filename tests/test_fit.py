@@ -271,3 +271,63 @@ def test_a_moving_camera_in_sfm_units_gives_the_person_scale(model, config, prio
     outcome = fit_track(energy, initial_state_2d(body, track, prior.mean), schedule, "person test")
     assert float(outcome.state.log_scale.exp()) == pytest.approx(units_per_metre, rel=0.1)
     assert outcome.stages[0]["scale_from_motion"] == pytest.approx(units_per_metre, rel=0.25)
+
+
+# ------------------------------------------------------------------------------------- metric 3D keypoints
+
+def _child_seen_from(model, frames: int):
+    """A child (the free body's child preset) walking, seen by a static camera: (truth, body, track with pixels
+    and the exact metric relative3d in the camera's axes)."""
+    names = [str(n) for n in model.data.extras["shape_preset_names"]]
+    child = np.asarray(model.data.extras["shape_preset_betas"], np.float64)[names.index("child")][:10]
+    base = _known_person(model, frames)
+    truth = BodyParams(base.frame_ids, child, base.global_orient, base.body_pose, base.transl, 1.0, "free",
+                       base.interpolated)
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    points = _posed_keypoints(body, truth).keypoints
+    K = intrinsics(320, 240, 60.0)
+    R, t = look_at_pose(np.array([0.0, 1.5, -1.0]), np.array([0.3, 1.0, 3.5]))
+    Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], frames, 0)) for a in (K, R, t))
+    cam = torch.einsum("ij,tkj->tki", Rs[0], points) + ts[0]
+    pixels = cam[..., :2] / cam[..., 2:] * torch.tensor([K[0, 0], K[1, 1]]) + torch.as_tensor(K[:2, 2])
+    relative = cam - cam[:, [11, 12]].mean(1, keepdim=True)  # COCO-17 hips
+    ones = torch.ones(frames, 17, dtype=F64)
+    return truth, body, Track(torch.arange(frames), torch.arange(frames, dtype=F64) / 10, pixels, ones, Ks, Rs, ts,
+                              relative, ones)
+
+
+def test_metric_3d_keypoints_fix_a_childs_size_and_distance(model, config, prior):
+    """From pixels alone a child is fitted at the shape prior's adult size, too far away; with the metric 3D
+    keypoints (exact here, their size trusted) the body's size, and so its distance, come out near, with no
+    alignment."""
+    from dataclasses import replace
+
+    from glimpse.fit.objective import relative3d_residual_m
+
+    truth, body, track = _child_seen_from(model, 10)
+    exact = _posed_keypoints(body, truth).keypoints
+    one, two = torch.tensor(1.0, dtype=F64), torch.tensor(2.0, dtype=F64)
+    assert float(relative3d_residual_m(exact, track, [11, 12], one).max()) < 1e-9
+    assert float(relative3d_residual_m(exact, track, [11, 12], two).max()) > 0.1
+    assert float(relative3d_residual_m(exact, track, [11, 12], two, model_size=False).max()) < 1e-9  # size free
+    metric_size = replace(config, weights=replace(config.weights, relative3d_size="model"))
+    errors = {}
+    for name, used in (("pixels", replace(track, relative3d=None, relative3d_weight=None)), ("metric", track)):
+        outcome = _fit(model, metric_size, prior, used, initial_state_2d(body, used, prior.mean))
+        errors[name] = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))["mpjpe_m"]
+    assert errors["metric"] < 0.15 and errors["pixels"] > 5 * errors["metric"], errors
+
+
+def test_metric_keypoints_are_turned_onto_the_persons_viewing_ray():
+    from glimpse.fit.stage import onto_viewing_rays
+
+    K = np.array([[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]])
+    relative = np.array([[[0.0, 0.0, 1.0], [0.0, -0.5, 0.0]]])  # one point 1 m behind the hips, one 0.5 m up
+    weight = np.ones((1, 2))
+    centred = onto_viewing_rays(relative, np.array([[[50.0, 40.0], [50.0, 40.0]]]), weight, K[None])
+    np.testing.assert_allclose(centred, relative)  # a person on the optical axis: nothing to turn
+    right = onto_viewing_rays(relative, np.array([[[150.0, 40.0], [150.0, 40.0]]]), weight, K[None])
+    np.testing.assert_allclose(right[0, 0], np.array([1.0, 0.0, 1.0]) / np.sqrt(2), atol=1e-12)  # along the ray
+    np.testing.assert_allclose(right[0, 1], [0.0, -0.5, 0.0], atol=1e-12)  # up stays up (turned about y)
+    unseen = onto_viewing_rays(relative, np.zeros((1, 2, 2)), np.zeros((1, 2)), K[None])
+    np.testing.assert_allclose(unseen, relative)

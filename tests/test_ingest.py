@@ -189,6 +189,54 @@ def test_downscale_and_frame_limit_are_stated(demo_video, tmp_path: Path) -> Non
 
 
 @needs_models
+def test_an_interrupted_ingest_goes_on_from_its_checkpoint(demo_video, tmp_path: Path, monkeypatch) -> None:
+    """Stopped after 9 of 12 frames (checkpoints every 4), run again: it tracks from frame 8 on and writes
+    the same scene as an ingest that was never stopped; its work folder is gone."""
+    from dataclasses import replace
+
+    from glimpse.ingest.tracker import Tracker
+
+    _, video = demo_video
+    config = replace(CONFIG, max_frames=12, checkpoint_frames=4, preview=False, track_min_frames=1)
+    whole = tmp_path / "whole"
+    ingest(video, whole, config)
+    step, calls, stop_at = Tracker.step, [], [10]
+
+    def counted(self, frame_id, image):
+        calls.append(frame_id)
+        if len(calls) == stop_at[0]:
+            raise RuntimeError("killed")  # as a crash or an interrupt: not a verdict on the video
+        return step(self, frame_id, image)
+
+    scene = tmp_path / "scene"
+    monkeypatch.setattr(Tracker, "step", counted)
+    with pytest.raises(RuntimeError, match="killed"):
+        ingest(video, scene, config)
+    assert (tmp_path / "scene.ingest-work" / "checkpoint.npz").is_file() and not scene.exists()
+    calls.clear()
+    stop_at[0] = 0  # no more interruptions
+    report = ingest(video, scene, config)
+    assert report["resumed_after_frames"] == 8 and calls == [8, 9, 10, 11]
+    assert not (tmp_path / "scene.ingest-work").exists()
+    assert sorted(p.name for p in (scene / "humans").iterdir()) == sorted(p.name for p in (whole / "humans").iterdir())
+    for person in (scene / "humans").iterdir():
+        ours, theirs = read_keypoints2d(person / "keypoints2d.npz"), read_keypoints2d(whole / "humans" / person.name
+                                                                                     / "keypoints2d.npz")
+        assert np.array_equal(ours.frame_ids, theirs.frame_ids) and np.array_equal(ours.keypoints, theirs.keypoints)
+        assert np.array_equal(ours.relative3d, theirs.relative3d)
+        for mask in (person / "masks").iterdir():
+            assert mask.read_bytes() == (whole / "humans" / person.name / "masks" / mask.name).read_bytes()
+    calls.clear()
+    stop_at[0] = 10
+    with pytest.raises(RuntimeError, match="killed"):
+        ingest(video, tmp_path / "again", config)
+    calls.clear()
+    stop_at[0] = 0
+    ingest(video, tmp_path / "again", replace(config, max_side=240))  # other parameters: the checkpoint is not used
+    assert calls == list(range(12))
+
+
+@needs_models
 def test_user_onnx_models_plug_in(demo_video, tmp_path: Path) -> None:
     """detector: onnx finds people (BlazePose still follows and segments them); pose: onnx gives the keypoints."""
     from dataclasses import replace

@@ -185,6 +185,25 @@ def test_scores_count_recall_switches_and_pck() -> None:
     assert scores["b"].recall == 0.0 and scores["b"].mask_iou == 0.0
 
 
+def test_joints_behind_the_persons_own_body_are_not_counted_in_pck_but_reported() -> None:
+    from glimpse.ingest.evaluate import in_front_of_own_body
+
+    # chest surface 2.0 m away; a near elbow 3 cm under its skin at 2.02 m; a far elbow behind the chest at
+    # 2.25 m, 3 cm under its own skin; a joint where no body surface is drawn
+    in_front = in_front_of_own_body(np.array([2.02, 2.25, 2.4]), np.array([2.0, 2.0, 0.0]),
+                                    np.array([0.03, 0.03, 0.03]), margin=0.05)
+    assert in_front.tolist() == [True, False, True]
+    a_true, a_found = _person(2)
+    hidden = np.zeros(17, bool)
+    hidden[[7, 9]] = True  # far elbow and wrist, reported far off by the finder
+    keypoints = a_found.keypoints.copy()
+    keypoints[[7, 9], :2] += 50
+    truth = {0: {"a": TruePerson(a_true.mask, a_true.joints, a_true.visible, ~hidden)}}
+    scores = score_people(truth, {0: {"x": FoundPerson(a_found.mask, keypoints)}}, pck_fraction=0.1)
+    assert scores["a"].pck == 1.0 and scores["a"].pck_silhouette == pytest.approx(15 / 17)
+    assert scores["a"].hidden_reported == 1.0
+
+
 def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
     from glimpse.ingest.blazepose import pair_sides_like
 
@@ -217,6 +236,26 @@ def test_smoothing_keeps_straight_motion_removes_jitter_and_never_invents() -> N
     assert out[4, 0].tolist() == [0.0, 0.0, 0.0]  # missing stays missing
     np.testing.assert_allclose(out[:, :, 2], noisy[:, :, 2])  # confidences untouched
     np.testing.assert_allclose(smooth_keypoints(frames, noisy, 0), noisy)
+    in_3d = np.concatenate([noisy[:, :, :2], np.full((10, 2, 1), 0.3), noisy[:, :, 2:]], axis=2)  # x, y, z, conf
+    out_3d = smooth_keypoints(frames, in_3d, 2)
+    np.testing.assert_allclose(out_3d[..., [0, 1, 3]], out, atol=1e-9)  # same fit per coordinate
+    np.testing.assert_allclose(out_3d[..., 2][noisy[..., 2] > 0], 0.3)
+
+
+def test_metric_landmarks_are_turned_from_the_crop_onto_the_image_axes() -> None:
+    from dataclasses import replace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS, COCO17_FROM_BLAZEPOSE
+
+    world = np.zeros((BODY_LANDMARKS, 3))
+    nose = COCO17_FROM_BLAZEPOSE[0]
+    world[nose] = [0.0, -0.6, 0.1]  # 60 cm up the crop, 10 cm away from the camera
+    upright = _landmarks_at(np.zeros((BODY_LANDMARKS, 2)), Region(np.zeros(2), 80.0, 0.0))
+    np.testing.assert_allclose(replace(upright, world=world).coco17_relative3d()[0], [0.0, -0.6, 0.1])
+    # a person lying along the image's x axis, head to the right: the crop is turned so the body is upright;
+    # the crop's x axis points along the image's y, its y (towards the feet) along the image's -x
+    lying = replace(upright, world=world, region=Region(np.zeros(2), 80.0, np.pi / 2))
+    np.testing.assert_allclose(lying.coco17_relative3d()[0], [0.6, 0.0, 0.1], atol=1e-12)
 
 
 # --- tracks behind other people -------------------------------------------------------------------------------
@@ -238,6 +277,27 @@ def test_a_hidden_track_is_expected_where_its_velocity_takes_it() -> None:
     track = Track(0, landmarks, np.zeros((2, 4)), velocity=np.array([5.0, -1.0]), missing=2)
     np.testing.assert_allclose(track.predicted_landmarks().points, np.tile([115.0, 97.0], (BODY_LANDMARKS, 1)))
     np.testing.assert_allclose(track.predicted_region().centre, [115.0, 97.0])
+
+
+def test_a_second_wrong_fit_of_one_person_is_the_same_person_but_a_neighbour_is_not() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS, COCO17_FROM_BLAZEPOSE
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.tracker import same_person
+
+    config = load_ingest_config()
+    region = Region(np.array([100.0, 150.0]), 200.0, 0.0)
+    body = np.zeros((BODY_LANDMARKS, 2))
+    coco = np.array(COCO17_FROM_BLAZEPOSE)
+    body[coco] = np.stack([np.full(17, 100.0), np.linspace(60.0, 260.0, 17)], 1)  # a standing figure
+    body[[11, 12]] = [[90.0, 110.0], [110.0, 110.0]]  # shoulders
+    body[[23, 24]] = [[92.0, 190.0], [108.0, 190.0]]  # hips: torso length 80 px
+    person = _landmarks_at(body, region)
+    wrong_limbs = body.copy()
+    wrong_limbs[coco[7:]] += [60.0, 0.0]  # same head and shoulders, arms, hips and legs 0.75 torso away
+    assert same_person(person, _landmarks_at(wrong_limbs, region), config)
+    neighbour = body + [30.0, 0.0]  # a person beside: every point 0.375 torso lengths away
+    assert not same_person(person, _landmarks_at(neighbour, region), config)
+    assert same_person(person, _landmarks_at(body + [8.0, 0.0], region), config)  # 0.1 torso: the same
 
 
 def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:

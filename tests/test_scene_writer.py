@@ -38,7 +38,8 @@ def test_a_written_scene_reads_back_the_same(tmp_path):
         writer.person_mask("alice", i, masks[i])
     writer.input_cameras(WIDTH, HEIGHT, K, np.array([0.01, 0.0, 0.0, 0.0]), poses)
     writer.smpl("alice", ids, **smpl)
-    writer.keypoints2d("alice", ids, "coco17", keypoints)
+    relative3d = np.concatenate([rng.normal(0, 0.4, (FRAMES, 17, 3)), rng.uniform(0, 1, (FRAMES, 17, 1))], axis=2)
+    writer.keypoints2d("alice", ids, "coco17", keypoints, relative3d)
     writer.keypoints3d("alice", ids, "coco17", joints)
     writer.reference("alice", "front", frames[0])
     writer.eval_camera("cam0", WIDTH, HEIGHT, K, poses[1].R, poses[1].t)
@@ -57,6 +58,7 @@ def test_a_written_scene_reads_back_the_same(tmp_path):
     person = scene.humans["alice"]
     assert all(np.array_equal(read_mask(person.masks[i]), masks[i]) for i in range(FRAMES))
     assert np.allclose(read_keypoints2d(person.keypoints2d).keypoints, keypoints)
+    assert np.allclose(read_keypoints2d(person.keypoints2d).relative3d, relative3d)
     assert np.allclose(read_keypoints3d(person.keypoints3d).joints, joints)
     with np.load(person.smpl) as archive:
         assert all(np.allclose(archive[key], value) for key, value in smpl.items())

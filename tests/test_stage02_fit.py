@@ -175,3 +175,40 @@ def test_in_the_wild_a_moving_camera_in_sfm_units_gets_the_person_scale(tmp_path
     assert report["metres_per_unit"] == pytest.approx(1 / report["scale"])
     errors = joint_errors(model, read_body_params(result / "humans" / "p0" / "body.npz"), _truth(scene, "p0"))
     assert errors["sequence_aligned_m"] < 0.10, errors
+
+
+def test_metric_3d_keypoints_beside_the_2d_ones_join_the_fit(tmp_path, model):
+    """keypoints2d.npz's relative3d (SCENE_FORMAT.md) is read, used when 02_smpl_fit.relative3d is on, and
+    reported as its own energy term; here the true bodies' keypoints relative to their mid hip."""
+    import torch
+
+    from glimpse.body.keypoints import keypoint_map
+    from glimpse.io.cameras_json import read_cameras_json
+
+    scene = make_scene("demo", tmp_path / "demo", "tiny", seed=1)
+    _, _, cameras = read_cameras_json(scene / "cameras.json")
+    coco = keypoint_map("coco17", model.data)
+    for pid in ("p0", "p1"):
+        path = scene / "humans" / pid / "keypoints2d.npz"
+        data, truth = dict(np.load(path)), _truth(scene, pid)
+        rows = data["frame_ids"]
+        with torch.no_grad():
+            out = model(torch.as_tensor(truth["betas"])[None], torch.as_tensor(truth["global_orient"][rows]),
+                        torch.as_tensor(truth["body_pose"][rows]), torch.as_tensor(truth["transl"][rows]))
+        joints = coco(out.joints, out.vertices).numpy()
+        in_camera = np.einsum("tij,tkj->tki", np.stack([cameras[int(f)].R for f in rows]), joints)
+        relative = in_camera - in_camera[:, [11, 12]].mean(1, keepdims=True)
+        data["relative3d"] = np.concatenate([relative, data["keypoints"][..., 2:]], axis=2)
+        np.savez(path, **data)
+    errors = {}
+    for used in ("false", "true"):
+        out = tmp_path / f"out_{used}"
+        run("01_sfm", scene, out)
+        result = run("02_smpl_fit", scene, out, f"02_smpl_fit.mode=keypoints2d 02_smpl_fit.relative3d={used} {FAST}")
+        for pid in ("p0", "p1"):
+            report = read_json(result / "humans" / pid / "fit_report.json")
+            assert all(("metric_3d" in stage["energy"]) == (used == "true") for stage in report["stages"])
+            params = read_body_params(result / "humans" / pid / "body.npz")
+            errors[used, pid] = joint_errors(model, params, _truth(scene, pid))["frame_aligned_m"]
+    for pid in ("p0", "p1"):  # exact metric keypoints tell the pose's depth, which the pixels leave open
+        assert errors["true", pid] < errors["false", pid], errors

@@ -16,6 +16,9 @@ class FitWeights:
     accel_sigma_m_s2: float
     speed_sigma_m_s: float
     turn_rate_sigma_deg_s: float
+    relative3d_noise_m: float
+    relative3d_robust_m: float
+    relative3d_size: Literal["model", "fitted"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,7 @@ class GroundConfig:
 class FitConfig:
     mode: Literal["auto", "provided", "keypoints3d", "keypoints2d"]
     keypoint_min_confidence: float
+    relative3d: bool
     min_keypoints: int
     max_interpolated_gap: int
     fit_scale: Literal["auto", "always", "never"]

@@ -271,8 +271,7 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
     batch = FitState(initial.betas.clone(), torch.cat(turned), repeat(initial.body_pose), repeat(initial.transl),
                      initial.log_scale.clone())
     selected = track.only(_global_indices(energy.body))
-    energy.track = Track(repeat(track.frame_ids), repeat(track.times_s), repeat(selected.points),
-                         repeat(selected.weight), repeat(track.K), repeat(track.R), repeat(track.t))
+    energy.track = selected.repeated(hypotheses)
     energy.update_depth_reference(batch)
     stage = _minimise(energy, batch, ["global_orient", "transl"], schedule.global_iterations, who, "global")
     with torch.no_grad():

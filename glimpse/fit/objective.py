@@ -6,6 +6,11 @@
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
   residual in metres at the person: the 3D distance, or the pixel distance times depth / focal length
   (so 2D and 3D fits share sigma and rho, and a far person weighs as much as a near one).
+- metric 3D (2D tracks that carry it: keypoints2d.npz's ``relative3d``, a monocular 3D pose model's output):
+  the same robust square on the distance between each keypoint relative to the mid hip, turned into the
+  camera's axes and measured in metres of body, and the model's metric point, with its own noise and robust
+  scales. It tells the pose's depth (which way a limb bends towards the camera) and, through the body's
+  metric size, how far the person is; the pixel keypoints still say where.
 - smoothness: squared joint accelerations (second differences over the frames' times, seconds) over
   ``sigma_acc^2``, between frames at most ``max_gap`` frames apart; speed (only when the scale is
   fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
@@ -19,7 +24,7 @@ Every term is a sum over frames (not a mean), so the priors weigh less where key
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import Tensor
@@ -29,6 +34,7 @@ from glimpse.fit.ground import height_above_plane
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.priors import JointLimits, PosePrior, shape_energy
 
+HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
 MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
 
 
@@ -36,7 +42,8 @@ MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) proj
 class Track:
     """One person's observations over T frames.
     points [T, K, 3] world units (3D) or [T, K, 2] pixels (2D); weight [T, K] confidence, 0 = unused;
-    times_s [T] seconds; frame_ids [T] ints; for 2D, cameras K/R/t [T, 3, 3], [T, 3, 3], [T, 3]."""
+    times_s [T] seconds; frame_ids [T] ints; for 2D, cameras K/R/t [T, 3, 3], [T, 3, 3], [T, 3], and
+    optionally relative3d [T, K, 3] (metres from the mid hip, the camera's axes) with relative3d_weight [T, K]."""
 
     frame_ids: Tensor
     times_s: Tensor
@@ -45,6 +52,8 @@ class Track:
     K: Tensor | None = None
     R: Tensor | None = None
     t: Tensor | None = None
+    relative3d: Tensor | None = None
+    relative3d_weight: Tensor | None = None
 
     @property
     def is_2d(self) -> bool:
@@ -54,7 +63,12 @@ class Track:
         """The same track with every other keypoint's weight set to 0."""
         keep = torch.zeros(self.weight.shape[1], dtype=self.weight.dtype)
         keep[keypoints] = 1.0
-        return Track(self.frame_ids, self.times_s, self.points, self.weight * keep, self.K, self.R, self.t)
+        relative_weight = None if self.relative3d_weight is None else self.relative3d_weight * keep
+        return replace(self, weight=self.weight * keep, relative3d_weight=relative_weight)
+
+    def repeated(self, times: int) -> "Track":
+        """The track's frames repeated ``times`` times along the frame axis (a batch of hypotheses)."""
+        return Track(*(None if v is None else v.repeat(times, *([1] * (v.ndim - 1))) for v in vars(self).values()))
 
 
 @dataclass
@@ -88,6 +102,21 @@ def keypoint_residual_m(keypoints: Tensor, track: Track, depth_ref: Tensor | Non
     pixels, _ = project(keypoints, track.K, track.R, track.t)
     focal = 0.5 * (track.K[:, 0, 0] + track.K[:, 1, 1])
     return (pixels - track.points).norm(dim=-1) * (depth_ref / focal)[:, None]
+
+
+def relative3d_residual_m(keypoints: Tensor, track: Track, hips: list[int], scale: Tensor,
+                          model_size: bool = True) -> Tensor:
+    """[T, K] metres: keypoints [T, K, 3] (world units) relative to the mid point of the ``hips`` keypoints,
+    turned into each frame's camera axes and divided by ``scale`` (world units per metre of body), against
+    the track's metric relative3d; times one factor for the whole track, the least-squares one (confidence
+    weighted), unless ``model_size`` (the model's metric size is trusted)."""
+    in_camera = torch.einsum("tij,tkj->tki", track.R, keypoints)
+    relative = (in_camera - in_camera[:, hips].mean(1, keepdim=True)) / scale
+    said = track.relative3d
+    if not model_size:
+        weight = track.relative3d_weight[..., None]
+        said = said * (weight * relative * said).sum() / (weight * said.square()).sum().clamp(min=1e-12)
+    return (relative - said).norm(dim=-1)
 
 
 def data_energy(residual_m: Tensor, weight: Tensor, noise_m: float, robust_m: float) -> Tensor:
@@ -160,6 +189,7 @@ class FitEnergy:
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
         self.floor: FloorContact | None = None  # the common floor, set for the ground refit
+        self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
 
     def posed(self, state: FitState):
         return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
@@ -172,16 +202,36 @@ class FitEnergy:
                 self.depth_ref = depth.mean(1).clamp(min=MIN_CAMERA_DEPTH)
 
     def data_per_frame(self, state: FitState, keypoints: Tensor | None = None) -> Tensor:
-        """[T] data energy of each frame (keypoints [T, K, 3] when already posed)."""
+        """[T] data energy of each frame (keypoints [T, K, 3] when already posed): the keypoints', plus the
+        metric 3D term where the track has it."""
         keypoints = self.posed(state).keypoints if keypoints is None else keypoints
+        energy = self.keypoint_data_per_frame(keypoints)
+        metric = self.relative3d_per_frame(state, keypoints)
+        return energy if metric is None else energy + metric
+
+    def keypoint_data_per_frame(self, keypoints: Tensor) -> Tensor:
+        """[T] the keypoints' robust data energy of posed keypoints [T, K, 3]."""
+        w = self.weights
         residual = keypoint_residual_m(keypoints, self.track, self.depth_ref)
-        return data_energy(residual, self.track.weight, self.weights.keypoint_noise_m,
-                           self.weights.robust_scale_m * self.robust_scale_factor)
+        return data_energy(residual, self.track.weight, w.keypoint_noise_m, w.robust_scale_m * self.robust_scale_factor)
+
+    def relative3d_per_frame(self, state: FitState, keypoints: Tensor) -> Tensor | None:
+        """[T] the metric 3D term of posed keypoints [T, K, 3], or None when the track has no metric keypoints
+        (or the layout no hips to measure them from)."""
+        track, w = self.track, self.weights
+        if track.relative3d is None or len(self.hips) != len(HIP_NAMES):
+            return None
+        relative = relative3d_residual_m(keypoints, track, self.hips, state.log_scale.exp(), w.relative3d_size == "model")
+        return data_energy(relative, track.relative3d_weight, w.relative3d_noise_m,
+                           w.relative3d_robust_m * self.robust_scale_factor)
 
     def terms(self, state: FitState) -> dict[str, Tensor]:
         w = self.weights
         out = self.posed(state)
-        terms = {"data": self.data_per_frame(state, out.keypoints).sum()}
+        terms = {"data": self.keypoint_data_per_frame(out.keypoints).sum()}
+        metric = self.relative3d_per_frame(state, out.keypoints)
+        if metric is not None:
+            terms["metric_3d"] = metric.sum()
         if self.use_priors:
             terms["pose_prior"] = w.pose_prior * self.pose_prior_scale * self.prior.energy(state.body_pose).sum()
             terms["joint_limits"] = w.joint_limits * self.limits.energy(state.body_pose).sum()

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
@@ -214,12 +215,19 @@ class Fitter:
         frame_ids = all_ids[keep]
         order = np.argsort(frame_ids)
         frame_ids, points, weight = frame_ids[order], values[keep][order, :, :-1], confidence[keep][order]
-        cams = {}
+        extra = {}
         if mode == "keypoints2d":
-            cams = {name: torch.as_tensor(np.stack([getattr(self.cameras[int(f)], name) for f in frame_ids]),
-                                          dtype=dtype) for name in ("K", "R", "t")}
+            extra = {name: torch.as_tensor(np.stack([getattr(self.cameras[int(f)], name) for f in frame_ids]),
+                                           dtype=dtype) for name in ("K", "R", "t")}
+            relative3d = read_keypoints2d(person.keypoints2d).relative3d if c.relative3d else None
+            if relative3d is not None:
+                relative3d = relative3d[keep][order]
+                rays = onto_viewing_rays(relative3d[..., :3], points, weight, extra["K"].numpy())
+                extra["relative3d"] = torch.as_tensor(rays, dtype=dtype)
+                extra["relative3d_weight"] = torch.as_tensor(
+                    np.where(relative3d[..., 3] >= c.keypoint_min_confidence, relative3d[..., 3], 0.0), dtype=dtype)
         track = Track(torch.as_tensor(frame_ids), torch.as_tensor(frame_ids / self.scene.fps, dtype=dtype),
-                      torch.as_tensor(points, dtype=dtype), torch.as_tensor(weight, dtype=dtype), **cams)
+                      torch.as_tensor(points, dtype=dtype), torch.as_tensor(weight, dtype=dtype), **extra)
         return track, layout
 
     def _initial_from_3d(self, person: HumanInputs, track: Track, body: KeypointBody) -> FitState:
@@ -247,6 +255,26 @@ class Fitter:
         return BodyParams(out_ids.astype(np.int64), state.betas.numpy().copy(), filled["global_orient"],
                           filled["body_pose"], filled["transl"], float(math.exp(float(state.log_scale))),
                           self.scene.body_model, interpolated)
+
+
+def onto_viewing_rays(relative: np.ndarray, pixels: np.ndarray, weight: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Metric 3D keypoints in the image's axes as a camera looking straight at the person sees them
+    (relative [T, J, 3], SCENE_FORMAT.md) -> the same points in the camera's axes: each frame's points turned
+    by the smallest rotation that takes the optical axis onto the ray through the person's confident pixel
+    keypoints' centre (pixels [T, J, 2], weight [T, J], intrinsics K [T, 3, 3]). A frame with no confident
+    keypoint is left as it is."""
+    out = relative.copy()
+    for t in range(len(relative)):
+        seen = weight[t] > 0
+        if not seen.any():
+            continue
+        ray = np.linalg.solve(K[t], np.append(pixels[t, seen].mean(0), 1.0))
+        ray /= np.linalg.norm(ray)
+        axis = np.cross([0.0, 0.0, 1.0], ray)
+        angle = np.arctan2(np.linalg.norm(axis), ray[2])
+        if np.linalg.norm(axis) > 0:
+            out[t] = relative[t] @ Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix().T
+    return out
 
 
 def choose_mode(person: HumanInputs, config: FitConfig) -> str:

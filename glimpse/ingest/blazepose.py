@@ -157,6 +157,15 @@ class PoseLandmarks:
         index = list(COCO17_FROM_BLAZEPOSE)
         return self.points[index], self.visibility[index] * self.presence[index]
 
+    def coco17_relative3d(self) -> np.ndarray:
+        """[17, 3] the COCO-17 landmarks in metres relative to the mid hip, in the image's axes (x right, y down,
+        z away from the camera): the model's world landmarks, given in its crop's axes, turned by the crop's
+        rotation about the viewing direction. (The model sees the person as a camera looking straight at
+        them would; turning that onto a camera's own axes needs its intrinsics, which stage 02 has.)"""
+        c, s = np.cos(self.region.angle), np.sin(self.region.angle)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return self.world[list(COCO17_FROM_BLAZEPOSE)] @ turn.T
+
 
 def decode_landmarks(raw: np.ndarray, score: float, world: np.ndarray, segmentation_logits: np.ndarray,
                      region: Region) -> PoseLandmarks:
@@ -217,13 +226,28 @@ def pair_sides_like(reference: np.ndarray, other: np.ndarray) -> np.ndarray:
     """``other``'s landmarks ([39 * 5] raw values) with each left/right pair swapped where that brings them closer
     to ``reference``'s: the model may call a side-on person's left what its mirrored run calls right, and
     averaging across that would put a knee between the knees."""
-    ref, out = reference.reshape(-1, LANDMARK_VALUES), other.reshape(-1, LANDMARK_VALUES).copy()
+    return swap_sides(other.reshape(-1, LANDMARK_VALUES), sides_to_swap(reference, other)).ravel()
+
+
+def sides_to_swap(reference: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
+    """The left/right landmark pairs of ``other`` ([39 * 5] raw values) that lie closer to ``reference``'s
+    swapped than as named (see :func:`pair_sides_like`)."""
+    ref, out = reference.reshape(-1, LANDMARK_VALUES), other.reshape(-1, LANDMARK_VALUES)
+    pairs = []
     for left, right in MIRROR_PAIRS:
         kept = np.linalg.norm(ref[left, :2] - out[left, :2]) + np.linalg.norm(ref[right, :2] - out[right, :2])
         swapped = np.linalg.norm(ref[left, :2] - out[right, :2]) + np.linalg.norm(ref[right, :2] - out[left, :2])
         if swapped < kept:
-            out[[left, right]] = out[[right, left]]
-    return out.ravel()
+            pairs.append((left, right))
+    return pairs
+
+
+def swap_sides(values: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """A copy of per-landmark ``values`` [N, C] with each (left, right) pair's rows exchanged."""
+    out = values.copy()
+    for left, right in pairs:
+        out[[left, right]] = out[[right, left]]
+    return out
 
 
 def _interpreter(path: Path, threads: int):
@@ -282,6 +306,9 @@ class BlazePose:
         if mirror_average:
             raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
             raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
-            raw, world = (raw + pair_sides_like(raw, raw_m)) / 2, (world + world_m) / 2
+            swaps = sides_to_swap(raw, raw_m)
+            raw_m = swap_sides(raw_m.reshape(-1, LANDMARK_VALUES), swaps).ravel()
+            world_m = swap_sides(world_m.reshape(-1, 3), swaps).ravel()
+            raw, world = (raw + raw_m) / 2, (world.ravel() + world_m) / 2
             segmentation, score = (segmentation + segmentation_m) / 2, (score + score_m) / 2
         return decode_landmarks(raw, score, world, segmentation, region)

@@ -30,6 +30,8 @@ class IngestConfig:
     landmark_flip_average: bool
     landmark_refine_steps: int
     track_same_person: float
+    track_shared_points: int
+    track_shared_point_distance: float
     track_covered_iou: float
     track_part_scale: float
     track_max_missing_frames: int
@@ -50,6 +52,7 @@ class IngestConfig:
     appearance_bins: int
     appearance_update: float
     preview: bool
+    checkpoint_frames: int
 
 
 def load_ingest_config(cli_params: str = "") -> IngestConfig:

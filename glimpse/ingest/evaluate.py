@@ -7,8 +7,12 @@ COCO-17 joints inside the image and on the person's own visible pixels):
 
 - recall: the fraction of those frames in which someone found is matched to the person;
 - switches: how often the found id matched to the person changes from one matched frame to the next;
-- PCK: the fraction of visible joints found (confidence > 0) within ``pck_fraction`` of the torso size
-  (left shoulder to right hip) of the true joint;
+- PCK: the fraction of the joints in view found (confidence > 0) within ``pck_fraction`` of the torso size
+  (left shoulder to right hip) of the true joint. A joint is in view when it is visible (as above) and not
+  behind the person's own body either (``in_front_of_own_body``: the far arm of someone seen side-on lies on
+  their visible pixels, but the camera does not see it, and the ingest is asked not to invent it). PCK over
+  every visible joint, the far arm included, is given too (``pck_silhouette``);
+- hidden reported: the fraction of joints behind the person's own body that were given a confidence > 0;
 - mask IoU: found mask against the true visible mask (0 where nobody was matched).
 """
 
@@ -30,6 +34,11 @@ class TruePerson:
     mask: np.ndarray  # [H, W] bool visible pixels
     joints: np.ndarray  # [17, 2] pixels
     visible: np.ndarray  # [17] bool: inside the image and on the person's visible pixels
+    in_view: np.ndarray | None = None  # [17] bool: visible and not behind the person's own body (None: = visible)
+
+    @property
+    def seen(self) -> np.ndarray:
+        return self.visible if self.in_view is None else self.visible & self.in_view
 
 
 @dataclass(frozen=True)
@@ -43,7 +52,9 @@ class PersonScore:
     frames: int  # frames where the person is at least half visible
     recall: float
     switches: int
-    pck: float
+    pck: float  # over the joints in view
+    pck_silhouette: float  # over every visible joint, those behind the person's own body included
+    hidden_reported: float  # share of the joints behind the person's own body given a confidence > 0
     mask_iou: float
     ids: tuple[str, ...]  # found ids matched to the person, in order of first match
 
@@ -63,6 +74,18 @@ def match_frame(truth: dict[str, TruePerson], found: dict[str, FoundPerson]) -> 
     return {true_ids[r]: (found_ids[c], float(iou[r, c])) for r, c in zip(rows, cols) if iou[r, c] >= MATCH_MIN_IOU}
 
 
+def in_front_of_own_body(joint_depth: np.ndarray, front_depth: np.ndarray, depth_under_skin: np.ndarray,
+                         margin: float) -> np.ndarray:
+    """[J] bool: joints the camera sees past the person's own body. joint_depth [J] camera z of each joint,
+    front_depth [J] the person's nearest surface depth at the joint's pixel (0 or less: no surface there),
+    depth_under_skin [J] how far each joint lies under the body's surface (distance to its nearest vertex),
+    all in metres. A joint is in front when it lies no deeper behind that surface than under its own skin
+    (+ ``margin`` for clothing and the skin's curvature); a far arm behind the chest is deeper by the
+    chest's thickness."""
+    no_surface = front_depth <= 0
+    return no_surface | (joint_depth <= front_depth + depth_under_skin + margin)
+
+
 def pck(joints: np.ndarray, visible: np.ndarray, keypoints: np.ndarray, fraction: float) -> tuple[int, int]:
     """(correct, counted) visible joints within ``fraction`` of the torso size."""
     torso = np.linalg.norm(joints[TORSO_JOINTS[0]] - joints[TORSO_JOINTS[1]])
@@ -80,7 +103,8 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
         for pid, person in truth[frame_id].items():
             if person.visible.mean() < HALF_VISIBLE:
                 continue
-            tally = tallies.setdefault(pid, {"frames": 0, "hit": 0, "ids": [], "correct": 0, "counted": 0, "iou": 0.0})
+            tally = tallies.setdefault(pid, {"frames": 0, "hit": 0, "ids": [], "correct": 0, "counted": 0, "iou": 0.0,
+                                             "silhouette": np.zeros(2), "hidden": np.zeros(2)})
             tally["frames"] += 1
             if pid not in matches:
                 continue
@@ -88,15 +112,22 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
             tally["hit"] += 1
             tally["iou"] += iou
             tally["ids"].append(found_id)
-            correct, counted = pck(person.joints, person.visible, found[frame_id][found_id].keypoints, pck_fraction)
+            keypoints = found[frame_id][found_id].keypoints
+            correct, counted = pck(person.joints, person.seen, keypoints, pck_fraction)
             tally["correct"] += correct
             tally["counted"] += counted
+            tally["silhouette"] += pck(person.joints, person.visible, keypoints, pck_fraction)
+            hidden = person.visible & ~person.seen
+            tally["hidden"] += (np.count_nonzero(hidden & (keypoints[:, 2] > 0)), np.count_nonzero(hidden))
     scores = {}
     for pid, t in sorted(tallies.items()):
         ids = t["ids"]
         scores[pid] = PersonScore(
             frames=t["frames"], recall=t["hit"] / t["frames"],
             switches=sum(a != b for a, b in pairwise(ids)),
-            pck=t["correct"] / t["counted"] if t["counted"] else 0.0, mask_iou=t["iou"] / t["frames"],
+            pck=t["correct"] / t["counted"] if t["counted"] else 0.0,
+            pck_silhouette=t["silhouette"][0] / t["silhouette"][1] if t["silhouette"][1] else 0.0,
+            hidden_reported=t["hidden"][0] / t["hidden"][1] if t["hidden"][1] else 0.0,
+            mask_iou=t["iou"] / t["frames"],
             ids=tuple(dict.fromkeys(ids)))
     return scores

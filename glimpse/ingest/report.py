@@ -26,6 +26,7 @@ class PersonTrack:
     label: int  # value in the label maps
     frames: list[int]
     keypoints: np.ndarray  # [T, 17, 3]
+    relative3d: np.ndarray  # [T, 17, 4] metres from the mid hip, image axes, confidence (Track.relative3d)
     boxes: np.ndarray  # [T, 4]
     reidentified: list[tuple[int, float]]
     jumps: list[int]

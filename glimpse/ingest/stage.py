@@ -10,7 +10,9 @@ Three streaming passes (one frame in memory at a time, at the working size):
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them).
 
 The scene is staged beside SCENE_DIR and renamed into place only when complete and valid: a failed ingest
-leaves a previous scene there untouched.
+leaves a previous scene there untouched. The tracking pass keeps its labels and, every ``checkpoint_frames``
+frames, its state (glimpse.ingest.checkpoint) in SCENE_DIR.ingest-work/: an interrupted ingest run again with
+the same video and parameters goes on from the last checkpoint; the folder is removed when the scene is done.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ from __future__ import annotations
 import logging
 import re
 import shutil
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,6 +30,7 @@ import numpy as np
 from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
 from glimpse.ingest.blazepose import BlazePose
+from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 from glimpse.ingest.report import (
@@ -50,6 +52,8 @@ log = logging.getLogger("glimpse")
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
 PREVIEW_FILE = "ingest/preview.mp4"
 REPORT_FILE = "ingest/tracks.json"
+WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
+CHECKPOINT_FILE = "checkpoint.npz"
 
 
 def blazepose_folder(config: IngestConfig) -> Path:
@@ -66,7 +70,7 @@ def user_models(config: IngestConfig) -> tuple[OnnxDetector | None, OnnxPose | N
 
 
 def _label_path(work: Path, frame_id: int) -> Path:
-    return work / f"{frame_name(frame_id)}.png"
+    return work / "labels" / f"{frame_name(frame_id)}.png"
 
 
 def _chosen_frames(path: Path, survey: Survey, desc: str) -> Iterator[tuple[int, np.ndarray]]:
@@ -91,7 +95,9 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
         boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
-        people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, boxes,
+        relative3d = smooth_keypoints(np.array(track.frames), np.stack(track.relative3d),
+                                      config.keypoint_smoothing_frames)
+        people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps)))
     return people, len(tracks) - len(kept)
 
@@ -110,8 +116,9 @@ def _scene_labels(labels: np.ndarray, people: list[PersonTrack], survey: Survey)
     return out
 
 
-def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: float) -> dict:
-    """The video's facts and the ingest's timings, for the tracks report."""
+def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: float, frames_done: int) -> dict:
+    """The video's facts and the ingest's timings, for the tracks report (``frames_done``: frames a
+    checkpoint had tracked before this run)."""
     static_with_focal = survey.focal_35mm is not None and survey.static
     return {
         "video": str(video), "video_size": [survey.info.width, survey.info.height],
@@ -125,7 +132,8 @@ def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: flo
         "intrinsics": ("cameras.json from the container's focal length" if static_with_focal
                        else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or SfM (moving)"),
         "seconds": {"tracking": track_seconds},
-        "tracking_fps": len(survey.chosen) / max(track_seconds, 1e-9),
+        "resumed_after_frames": frames_done,
+        "tracking_fps": (len(survey.chosen) - frames_done) / max(track_seconds, 1e-9),
     }
 
 
@@ -153,31 +161,54 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
              survey.motion.motion)
     scene_dir.parent.mkdir(parents=True, exist_ok=True)
     writer = SceneWriter(scene_dir, scene_name_of(video), survey.fps, "static" if survey.static else "moving")
+    work = scene_dir.with_name(scene_dir.name + WORK_SUFFIX)
+    tracker = Tracker(model, config, survey.plate, user_detector, user_pose)
+    key = fingerprint(video, config)
+    resumed = load_checkpoint(work / CHECKPOINT_FILE, key)
+    if resumed is None:
+        shutil.rmtree(work, ignore_errors=True)
+        frames_done = 0
+    else:
+        tracker.tracks, frames_done = resumed
+        log.info("%s: going on from the checkpoint in %s (%d of %d frames tracked)", video, work, frames_done,
+                 len(survey.chosen))
+    (work / "labels").mkdir(parents=True, exist_ok=True)
     try:
-        with tempfile.TemporaryDirectory(prefix=scene_dir.name + ".labels.", dir=scene_dir.parent) as work_dir:
-            report = _track_and_write(video, survey, config, writer, Path(work_dir),
-                                      Tracker(model, config, survey.plate, user_detector, user_pose))
-            report["seconds"]["total"] = time.perf_counter() - started
-            write_json(writer.side_file(REPORT_FILE), report)
-            writer.finish()
-    except BaseException:
+        report = _track_and_write(video, survey, config, writer, work, tracker, frames_done, key)
+        report["seconds"]["total"] = time.perf_counter() - started
+        write_json(writer.side_file(REPORT_FILE), report)
+        writer.finish()
+    except GlimpseError:
         shutil.rmtree(writer.staging, ignore_errors=True)  # a previous scene at scene_dir stays as it was
+        shutil.rmtree(work, ignore_errors=True)  # a verdict (no person, an invalid scene): nothing to go on from
         raise
+    except BaseException:
+        shutil.rmtree(writer.staging, ignore_errors=True)
+        if (work / CHECKPOINT_FILE).exists():
+            print(f"ingest interrupted; its tracking is saved in {work}: run the same command again to go on "
+                  "from there")
+        raise
+    shutil.rmtree(work, ignore_errors=True)
     _announce(video, scene_dir, survey, report, config)
     return report
 
 
 def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: SceneWriter, work: Path,
-                     tracker: Tracker) -> dict:
-    """Passes 2 and 3 (see the module docstring) into ``writer``; returns the tracks report."""
+                     tracker: Tracker, frames_done: int, key: str) -> dict:
+    """Passes 2 and 3 (see the module docstring) into ``writer``, the tracking going on after the first
+    ``frames_done`` chosen frames (a checkpoint's; their labels are in ``work``); returns the tracks report."""
     track_started = time.perf_counter()
     track_size = (survey.track_width, survey.track_height)
-    for frame_id, rgb in _chosen_frames(video, survey, "tracking people"):
+    for index, (frame_id, rgb) in enumerate(_chosen_frames(video, survey, "tracking people")):
         writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
+        if index < frames_done:
+            continue
         tracked = resized(rgb, track_size)
         observed = tracker.step(frame_id, tracked)
         labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius)
         cv2.imwrite(str(_label_path(work, frame_id)), labels)
+        if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
+            save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)
     track_seconds = time.perf_counter() - track_started
     people, dropped = _kept_people(tracker.tracks, survey, config)
     if not people:
@@ -188,7 +219,7 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
     for person in people:
-        writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints)
+        writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints, person.relative3d)
         for frame_id in person.frames:
             labels = cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
             writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
@@ -198,7 +229,7 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
                   for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
         write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
                   survey.fps)
-    return tracks_report(people, dropped, _facts(video, survey, config, track_seconds))
+    return tracks_report(people, dropped, _facts(video, survey, config, track_seconds, frames_done))
 
 
 def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:

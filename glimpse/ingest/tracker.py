@@ -83,6 +83,7 @@ class Track:
     missing: int = 0  # consecutive frames without an observation
     frames: list[int] = field(default_factory=list)
     keypoints: list[np.ndarray] = field(default_factory=list)  # [17, 3] per frame in ``frames``
+    relative3d: list[np.ndarray] = field(default_factory=list)  # [17, 4] per frame: PoseLandmarks.coco17_relative3d, confidence
     boxes: list[np.ndarray] = field(default_factory=list)
     reidentified: list[tuple[int, float]] = field(default_factory=list)  # (frame id, appearance distance)
     jumps: list[int] = field(default_factory=list)  # frame ids where the box jumped (suspected switches)
@@ -114,17 +115,23 @@ def torso_length(landmarks: PoseLandmarks) -> float:
                                     - landmarks.points[list(MID_HIPS)].mean(0)), 1.0))
 
 
-def same_person(a: PoseLandmarks, b: PoseLandmarks, threshold: float) -> bool:
+def same_person(a: PoseLandmarks, b: PoseLandmarks, config: IngestConfig) -> bool:
     """Whether two sets of landmarks describe one person: their body points (COCO-17, both confident) lie within
-    ``threshold`` torso lengths of each other on average. Masks cannot tell: the landmark model segments every
-    person in its crop, so two people who overlap have overlapping masks."""
+    ``track_same_person`` torso lengths of each other on average, or at least ``track_shared_points`` of them
+    each within ``track_shared_point_distance`` (a second, wrong fit of one person: the same head on other
+    arms and legs, or the same legs under another head; two people do not share several joints). Masks cannot
+    tell: the landmark model segments every person in its crop, so two people who overlap have overlapping
+    masks."""
     points_a, confidence_a = a.coco17()
     points_b, confidence_b = b.coco17()
     both = (confidence_a > SAME_PERSON_CONFIDENCE) & (confidence_b > SAME_PERSON_CONFIDENCE)
+    confident_pairs = both.copy()
     if both.sum() < SAME_PERSON_MIN_POINTS:
         both = np.ones_like(both)
-    distance = np.linalg.norm(points_a[both] - points_b[both], axis=1).mean()
-    return bool(distance < threshold * (torso_length(a) + torso_length(b)) / 2)
+    scale = (torso_length(a) + torso_length(b)) / 2
+    distance = np.linalg.norm(points_a - points_b, axis=1)
+    shared = np.count_nonzero(confident_pairs & (distance < config.track_shared_point_distance * scale))
+    return bool(distance[both].mean() < config.track_same_person * scale or shared >= config.track_shared_points)
 
 
 def part_of(small: Observation, large: Observation, max_scale: float) -> bool:
@@ -141,7 +148,7 @@ def part_of(small: Observation, large: Observation, max_scale: float) -> bool:
 def one_person(a: Observation, b: Observation, config: IngestConfig) -> bool:
     """Whether two observations show one person: the same body, or one a piece of the other."""
     return (part_of(a, b, config.track_part_scale) or part_of(b, a, config.track_part_scale)
-            or same_person(a.landmarks, b.landmarks, config.track_same_person))
+            or same_person(a.landmarks, b.landmarks, config))
 
 
 def skeleton_distance(landmarks: PoseLandmarks, shape: tuple[int, int]) -> np.ndarray:
@@ -274,7 +281,7 @@ class Tracker:
                     loser = a  # a piece of b's person
                 elif part_of(seen_b, seen_a, self.config.track_part_scale):
                     loser = b
-                elif same_person(seen_a.landmarks, seen_b.landmarks, self.config.track_same_person):
+                elif same_person(seen_a.landmarks, seen_b.landmarks, self.config):
                     cost_a = appearance_distance(tracks[a].look, seen_a.look)
                     cost_b = appearance_distance(tracks[b].look, seen_b.look)
                     loser = b if cost_a <= cost_b else a
@@ -390,6 +397,8 @@ class Tracker:
         confidence = np.where(confidence >= config.keypoint_min_confidence, confidence, 0.0)
         track.frames.append(frame_id)
         track.keypoints.append(np.concatenate([np.where(confidence[:, None] > 0, points, 0.0), confidence[:, None]], 1))
+        relative = landmarks.coco17_relative3d()
+        track.relative3d.append(np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0), confidence[:, None]], 1))
         track.boxes.append(observation.box)
 
 

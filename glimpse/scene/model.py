@@ -149,11 +149,15 @@ class Keypoints2D:
     frame_ids: (T,) int64.
     layout:    a key of :data:`KEYPOINT_LAYOUTS`.
     keypoints: (T, J, 3) float64: pixel x, pixel y, confidence in [0, 1] (0 = missing).
+    relative3d: (T, J, 4) float64 or None: metric 3D keypoints relative to the mid hip, in the image's axes
+               (x right, y down, z away from the camera, as seen looking straight at the person), and
+               confidence in [0, 1]; what a monocular 3D pose model (BlazePose's world landmarks) says.
     """
 
     frame_ids: np.ndarray
     layout: str
     keypoints: np.ndarray
+    relative3d: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -168,6 +172,9 @@ class Keypoints3D:
     frame_ids: np.ndarray
     layout: str
     joints: np.ndarray
+
+
+RELATIVE3D_KEY = "relative3d"  # keypoints2d.npz's optional metric 3D keypoints (Keypoints2D.relative3d)
 
 
 def _read_keypoints(path: str | Path, key: str, channels: int) -> tuple[np.ndarray, str, np.ndarray]:
@@ -189,7 +196,12 @@ def _read_keypoints(path: str | Path, key: str, channels: int) -> tuple[np.ndarr
 
 def read_keypoints2d(path: str | Path) -> Keypoints2D:
     """Read a ``keypoints2d.npz`` file (see :class:`Keypoints2D`)."""
-    return Keypoints2D(*_read_keypoints(path, "keypoints", 3))
+    frame_ids, layout, keypoints = _read_keypoints(path, "keypoints", 3)
+    with np.load(Path(path), allow_pickle=False) as npz:
+        relative3d = np.asarray(npz[RELATIVE3D_KEY], dtype=np.float64) if RELATIVE3D_KEY in npz.files else None
+    if relative3d is not None and relative3d.shape != (*keypoints.shape[:2], 4):
+        raise ValueError(f"{path}: expected {RELATIVE3D_KEY} of shape (T, J, 4); got {relative3d.shape}")
+    return Keypoints2D(frame_ids, layout, keypoints, relative3d)
 
 
 def read_keypoints3d(path: str | Path) -> Keypoints3D:

@@ -18,7 +18,7 @@ from glimpse.scene._common import (
     entry_kind,
     list_folder,
 )
-from glimpse.scene.model import KEYPOINT_LAYOUTS
+from glimpse.scene.model import KEYPOINT_LAYOUTS, RELATIVE3D_KEY
 
 RESERVED_PID = "union"
 PERSON_FILES = ("smpl.npz", "keypoints2d.npz", "keypoints3d.npz")
@@ -201,21 +201,24 @@ def check_smpl(facts: SceneFacts, path: Path) -> None:
 
 
 def check_keypoints(facts: SceneFacts, path: Path, key: str, channels: int) -> None:
-    """keypoints2d.npz (``key="keypoints"``, 3 channels: x, y, confidence) or keypoints3d.npz
-    (``key="joints"``, 4 channels: x, y, z, confidence): frame_ids, layout, (T, J, channels)."""
+    """keypoints2d.npz (``key="keypoints"``, 3 channels: x, y, confidence; optionally ``relative3d``, 4 channels:
+    metric x, y, z from the mid hip, confidence) or keypoints3d.npz (``key="joints"``, 4 channels: x, y, z,
+    confidence): frame_ids, layout, (T, J, channels)."""
     arrays = load_npz(facts, path)
     if arrays is None:
         return
     rel = facts.rel(path)
     _require_keys(facts, rel, arrays, ("frame_ids", "layout", key))
     sizes = {"T": _check_frame_ids(facts, rel, arrays), "J": _check_layout(facts, rel, arrays)}
-    values = _check_array(facts, rel, key, arrays[key], ("T", "J", channels), sizes) if key in arrays else None
-    if values is not None and values.size:
-        confidence = values[..., -1]
-        low, high = float(confidence.min()), float(confidence.max())
-        if low < 0.0 or high > 1.0:
-            facts.add(rel, f"{key} confidence (the last channel) must be in [0, 1]",
-                      f"values from {low:g} to {high:g}")
+    present = [(key, channels)] + ([(RELATIVE3D_KEY, 4)] if key == "keypoints" and RELATIVE3D_KEY in arrays else [])
+    for name, width in present:
+        values = _check_array(facts, rel, name, arrays[name], ("T", "J", width), sizes) if name in arrays else None
+        if values is not None and values.size:
+            confidence = values[..., -1]
+            low, high = float(confidence.min()), float(confidence.max())
+            if low < 0.0 or high > 1.0:
+                facts.add(rel, f"{name} confidence (the last channel) must be in [0, 1]",
+                          f"values from {low:g} to {high:g}")
 
 
 # --- masks/ and reference/ --------------------------------------------------------------------------

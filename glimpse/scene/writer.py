@@ -108,9 +108,12 @@ class SceneWriter:
         np.savez(folder / "smpl.npz", frame_ids=np.asarray(frame_ids), betas=betas, global_orient=global_orient,
                  body_pose=body_pose, transl=transl)
 
-    def keypoints2d(self, pid: str, frame_ids: np.ndarray, layout: str, keypoints: np.ndarray) -> None:
-        """humans/<pid>/keypoints2d.npz: keypoints [T, J, 3] (pixel x, y, confidence) in ``layout``."""
-        self._keypoints(pid, "keypoints2d.npz", frame_ids, layout, keypoints=keypoints)
+    def keypoints2d(self, pid: str, frame_ids: np.ndarray, layout: str, keypoints: np.ndarray,
+                    relative3d: np.ndarray | None = None) -> None:
+        """humans/<pid>/keypoints2d.npz: keypoints [T, J, 3] (pixel x, y, confidence) in ``layout``; optionally
+        relative3d [T, J, 4] (metres from the mid hip in the image's axes, confidence: SCENE_FORMAT.md)."""
+        extra = {} if relative3d is None else {"relative3d": relative3d}
+        self._keypoints(pid, "keypoints2d.npz", frame_ids, layout, keypoints=keypoints, **extra)
 
     def keypoints3d(self, pid: str, frame_ids: np.ndarray, layout: str, joints: np.ndarray) -> None:
         """humans/<pid>/keypoints3d.npz: joints [T, J, 4] (world x, y, z in metres, confidence) in ``layout``."""

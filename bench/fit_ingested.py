@@ -1,0 +1,157 @@
+"""Stage 02 on what the ingest finds: bodies fitted from a video's 2D keypoints, with and without the metric 3D
+keypoints (BlazePose's world landmarks) the ingest writes beside them, against the true bodies.
+
+Each scenario is rendered at the `hd` fixture size (960x720, 60 frames over 3 s), encoded to a video and
+ingested with the default parameters, as in bench/ingest.py. Stage 01 is left out: the fixture's own cameras
+are used, so that the table measures the fit alone. Each found person is matched to the true person whose
+visible masks it overlaps most, then every person is fitted (stage 02's defaults: one floor for everyone)
+three times: from the 2D keypoints only (02_smpl_fit.relative3d false), with the metric 3D keypoints and
+their size (relative3d_size: model), and with them up to one size factor per person (fitted).
+Per scene: mean per-joint error with no alignment and after one similarity per person's sequence, pelvis
+distance errors, depth order agreement (glimpse.fit.evaluate), and how the metric 3D keypoints themselves
+compare with the true body's (turned onto each frame's viewing ray as stage 02 does).
+
+    python bench/fit_ingested.py [--scenarios demo,adult_child] [--seed 0] [--work DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import torch
+
+BENCH = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != BENCH]  # bench/profile.py would shadow the
+sys.path.insert(0, str(BENCH.parent))                                       # standard library's profile, which
+sys.path.append(str(BENCH))                                                 # torch imports; bench/ingest.py is
+
+from ingest import fixture_video, found_people, true_people  # noqa: E402  (read after the standard library)
+
+from glimpse.body.keypoints import keypoint_map  # noqa: E402
+from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
+from glimpse.fit.config import FitConfig  # noqa: E402
+from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
+from glimpse.fit.stage import Fitter, onto_viewing_rays  # noqa: E402
+from glimpse.fixtures.scenes import FREE_BODY  # noqa: E402
+from glimpse.ingest.config import load_ingest_config  # noqa: E402
+from glimpse.ingest.evaluate import match_frame  # noqa: E402
+from glimpse.ingest.stage import ingest  # noqa: E402
+from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.scene import load_scene, read_keypoints2d  # noqa: E402
+
+SIZE = "hd"
+SCENARIOS = ("demo", "adult_child", "lower_body_occluded", "crouch")
+THREADS = 2
+HIPS = (11, 12)  # COCO-17
+VARIANTS = (("no", False, "model"), ("its size", True, "model"), ("size fitted", True, "fitted"))  # metric 3D term
+
+
+def ingested_scene(scenario: str, seed: int, work: Path) -> tuple[Path, Path]:
+    """(fixture folder, its video's ingested scene), each made only when not already in ``work``."""
+    fixture, video = fixture_video(scenario, SIZE, seed, work)
+    scene = work / f"{fixture.name}.ingested"
+    if not (scene / "scene.yaml").exists():
+        ingest(video, scene, load_ingest_config())
+    return fixture, scene
+
+
+def true_ids(fixture: Path, scene: Path) -> dict[str, str]:
+    """Found pid -> the true pid it is matched to in most frames (by visible-mask IoU)."""
+    truth = true_people(fixture, ("coco17_skin",))["coco17_skin"]
+    found = found_people(scene)
+    votes: dict[str, Counter] = {}
+    for frame_id, people in truth.items():
+        for true_pid, (found_pid, _) in match_frame(people, found.get(frame_id, {})).items():
+            votes.setdefault(found_pid, Counter())[true_pid] += 1
+    return {found_pid: counter.most_common(1)[0][0] for found_pid, counter in votes.items()}
+
+
+def metric_keypoint_errors(model: BodyModel, scene: Path, truth_dir: Path, ids: dict[str, str],
+                           cameras: dict) -> dict[str, float]:
+    """How the scene's relative3d compare with the true bodies' COCO-17 joints relative to their mid hip, in
+    the camera's axes, metres: mean error, and the ratio of their mean distance from the mid hip to the
+    truth's (the model's idea of the person's size)."""
+    coco = keypoint_map("coco17", model.data)
+    errors, ratios = [], []
+    for found_pid, true_pid in ids.items():
+        kp = read_keypoints2d(scene / "humans" / found_pid / "keypoints2d.npz")
+        body = np.load(truth_dir / f"{true_pid}_body.npz")
+        rows = kp.frame_ids
+        with torch.no_grad():
+            out = model(torch.as_tensor(body["betas"])[None], torch.as_tensor(body["global_orient"][rows]),
+                        torch.as_tensor(body["body_pose"][rows]), torch.as_tensor(body["transl"][rows]))
+        joints = coco(out.joints, out.vertices).numpy()
+        K = np.stack([cameras[int(f)].K for f in rows])
+        R = np.stack([cameras[int(f)].R for f in rows])
+        true = np.einsum("tij,tkj->tki", R, joints)
+        true -= true[:, list(HIPS)].mean(1, keepdims=True)
+        weight = kp.keypoints[..., 2]
+        said = onto_viewing_rays(kp.relative3d[..., :3], kp.keypoints[..., :2], weight, K)
+        used = (weight > 0) & (kp.relative3d[..., 3] > 0)
+        errors.append(np.linalg.norm(said - true, axis=-1)[used])
+        ratios.append(np.linalg.norm(said, axis=-1)[used].mean() / np.linalg.norm(true, axis=-1)[used].mean())
+    return {"relative3d_error_m": float(np.concatenate(errors).mean()), "relative3d_size_ratio": float(np.mean(ratios))}
+
+
+def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
+    fixture, scene_dir = ingested_scene(scenario, seed, work)
+    truth_dir = fixture.with_name(fixture.name + ".groundtruth")
+    ids = true_ids(fixture, scene_dir)
+    scene = load_scene(scene_dir)
+    _, _, cameras = read_cameras_json(fixture / "cameras.json")
+    centres = {fid: camera.centre for fid, camera in cameras.items()}
+    metric = metric_keypoint_errors(model, scene_dir, truth_dir, ids, cameras)
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    rows = []
+    people = [person for pid, person in sorted(scene.humans.items()) if pid in ids]
+    for variant, relative3d, size in VARIANTS:
+        weights = {**raw["weights"], "relative3d_size": size}
+        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "mode": "keypoints2d", "weights": weights,
+                                                 "relative3d": relative3d}, "pipeline.yaml 02_smpl_fit")
+        started = time.perf_counter()
+        fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(people)
+        seconds = time.perf_counter() - started
+        fitted = {ids[fit.pid]: fit.params for fit in fits}
+        truths = {pid: dict(np.load(truth_dir / f"{pid}_body.npz")) for pid in fitted}
+        placement = placement_errors(model, fitted, truths, centres)
+        frames = sum(int((~params.interpolated).sum()) for params in fitted.values())
+        for pid, params in sorted(fitted.items()):
+            rows.append({"scenario": scenario, "person": pid, "variant": variant, "floor": floor["applied"],
+                         "seconds_per_100_frames": 100 * seconds / frames, **placement, **metric,
+                         **joint_errors(model, params, truths[pid])})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenarios", default=",".join(SCENARIOS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--work", type=Path, default=None, help="keeps fixtures, videos and ingests between runs")
+    args = parser.parse_args()
+    torch.set_num_threads(THREADS)
+    work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-fit-ingested-"))
+    work.mkdir(parents=True, exist_ok=True)
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    rows = [row for name in args.scenarios.split(",") for row in run(name, args.seed, work, model)]
+    print(f"\nStage 02 on ingested fixture videos ({SIZE}, seed {args.seed}, the fixtures' cameras); cm\n")
+    print("| scene | person | metric 3D | floor | as fitted | person-aligned | pelvis distances | depth order | "
+          "metric 3D keypoints' error | their size / true | s per person per 100 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        distance, order = r["pelvis_distance_error_m"], r["depth_order_agreement"]
+        print(f"| {r['scenario']} | {r['person']} | {r['variant']} | "
+              f"{'yes' if r['floor'] else 'no'} | {100 * r['mpjpe_m']:.1f} | {100 * r['sequence_aligned_m']:.1f} | "
+              f"{'-' if np.isnan(distance) else f'{100 * distance:.1f}'} | "
+              f"{'-' if np.isnan(order) else f'{100 * order:.0f}%'} | {100 * r['relative3d_error_m']:.1f} | "
+              f"{r['relative3d_size_ratio']:.2f} | {r['seconds_per_100_frames']:.0f} |")
+
+
+if __name__ == "__main__":
+    main()
