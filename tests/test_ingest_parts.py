@@ -315,3 +315,33 @@ def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:
     tracker = Tracker.__new__(Tracker)
     assert tracker._hidden_by_others(live, {0: found}) == {1}
     assert tracker._hidden_by_others(live, {}) == set()
+
+
+def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
+    from types import SimpleNamespace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.report import tracks_report
+    from glimpse.ingest.stage import _kept_people
+    from glimpse.ingest.tracker import Track
+
+    config = load_ingest_config()
+    survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480)
+    region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
+
+    def track(index: int, frames: int, height: float) -> Track:
+        t = Track(index, _landmarks_at(np.zeros((BODY_LANDMARKS, 2)), region), np.zeros((2, 4)))
+        t.frames = list(range(frames))
+        t.keypoints = [np.ones((17, 3))] * frames
+        t.relative3d = [np.ones((17, 4))] * frames
+        t.boxes = [np.array([10.0, 10.0, 30.0, 10.0 + height])] * frames
+        return t
+
+    tall = track(0, config.track_min_frames, 0.5 * 480)
+    small = track(1, 40, 0.5 * config.track_min_height * 480)  # a pattern on the floor, followed for long
+    short = track(2, config.track_min_frames - 1, 0.5 * 480)
+    people, dropped = _kept_people([tall, small, short], survey, config)
+    assert [p.label for p in people] == [1] and dropped == {"short": 1, "small": 1}
+    report = tracks_report(people, dropped, {})
+    assert report["dropped_short_tracks"] == 1 and report["dropped_small_tracks"] == 1

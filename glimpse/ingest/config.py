@@ -37,6 +37,7 @@ class IngestConfig:
     track_max_missing_frames: int
     track_reid_max_distance: float
     track_min_frames: int
+    track_min_height: float
     track_switch_distance: float
     foreground_threshold: int
     foreground_min_area: float

@@ -72,8 +72,9 @@ def preview_frames(frames: Iterator[tuple[int, np.ndarray, np.ndarray]], people:
         yield draw_frame(image, labels, people, frame_id, min_confidence)
 
 
-def tracks_report(people: list[PersonTrack], dropped: int, facts: dict) -> dict:
-    """The tracks report (tracks.json): the video's facts, then per person what was found."""
+def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict:
+    """The tracks report (tracks.json): the video's facts, then per person what was found, and how many tracks
+    were dropped (``dropped``: {"short": n, "small": n})."""
     persons = {}
     for person in people:
         confidence = person.keypoints[..., 2]
@@ -86,7 +87,8 @@ def tracks_report(people: list[PersonTrack], dropped: int, facts: dict) -> dict:
                                    for f, d in person.reidentified]
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],
         }
-    return {"format": REPORT_FORMAT, **facts, "people": persons, "dropped_short_tracks": dropped}
+    return {"format": REPORT_FORMAT, **facts, "people": persons, "dropped_short_tracks": dropped["short"],
+            "dropped_small_tracks": dropped["small"]}
 
 
 def report_table(report: dict) -> str:

@@ -85,10 +85,15 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
-def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> tuple[list[PersonTrack], int]:
-    """Tracks seen in at least ``track_min_frames`` frames, named p0, p1, ... in order of first appearance, their
-    keypoints smoothed over time and, with their boxes, in scene pixels."""
-    kept = sorted((t for t in tracks if len(t.frames) >= config.track_min_frames), key=lambda t: (t.frames[0], t.index))
+def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> tuple[list[PersonTrack], dict]:
+    """Tracks seen in at least ``track_min_frames`` frames whose box is usually (median over their frames) at
+    least ``track_min_height`` of the frame's height, named p0, p1, ... in order of first appearance, their
+    keypoints smoothed over time and, with their boxes, in scene pixels; and how many tracks were dropped, by
+    reason."""
+    long_enough = [t for t in tracks if len(t.frames) >= config.track_min_frames]
+    kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
+                  key=lambda t: (t.frames[0], t.index))
+    dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(kept)}
     people = []
     for k, track in enumerate(kept):
         keypoints = smooth_keypoints(np.array(track.frames), np.stack(track.keypoints), config.keypoint_smoothing_frames)
@@ -99,7 +104,12 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
                                       config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps)))
-    return people, len(tracks) - len(kept)
+    return people, dropped
+
+
+def _median_height(track: Track) -> float:
+    """Pixels: the median height of a track's landmark boxes."""
+    return float(np.median([box[3] - box[1] for box in track.boxes]))
 
 
 def _person_mask(labels: np.ndarray, label: int, survey: Survey) -> np.ndarray:
@@ -213,8 +223,9 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
     people, dropped = _kept_people(tracker.tracks, survey, config)
     if not people:
         raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
-                           f"{config.track_min_frames} frames or more); Glimpse reconstructs people, so it "
-                           "needs a video with at least one person in view")
+                           f"{config.track_min_frames} frames or more at {config.track_min_height:g} of the frame's "
+                           "height or taller: ingest.track_min_frames, track_min_height); Glimpse reconstructs "
+                           "people, so it needs a video with at least one person in view")
     if survey.focal_35mm is not None and survey.static:  # a moving camera's K waits for stage 01's SfM
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
