@@ -26,12 +26,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-BENCH = Path(__file__).resolve().parent
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != BENCH]  # bench/profile.py would shadow the
-sys.path.insert(0, str(BENCH.parent))                                       # standard library's profile, which
-sys.path.append(str(BENCH))                                                 # torch imports; bench/ingest.py is
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ingest import fixture_video, found_people, true_people  # noqa: E402  (read after the standard library)
+from ingest import fixture_video, found_people, true_people  # noqa: E402  (bench/ingest.py, beside this file)
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402

@@ -9,7 +9,7 @@ The trainers mark their phases (data, pose, render, loss, backward, optimiser, p
 an iteration outside every phase is counted as ``other`` (Python between the phases, learning-rate updates). On
 CUDA each phase ends with a synchronisation, so that a phase is charged for its own kernels (the loop reads
 the loss every iteration anyway, so this costs little). Stages 04 and 06 write the result in their report
-(``phase_seconds``); bench/profile.py prints it as a table.
+(``phase_seconds``); bench/phase_profile.py prints it as a table.
 """
 
 from __future__ import annotations
