@@ -116,6 +116,32 @@ def test_mixture_pose_prior_has_one_gaussian_per_motion_and_keeps_a_crouch(confi
     assert torch.autograd.gradcheck(prior.energy, (pose.clone().requires_grad_(True),))
 
 
+def test_a_prior_mixed_over_the_legs_only_keeps_a_crouch_and_the_arms_broad_pull(config):
+    """The legs' rotations under a mixture (one Gaussian per motion), the other joints under one Gaussian: the
+    energy is the sum of the two parts, each equal to the prior built on its numbers alone."""
+    from glimpse.fit.priors import build_parted_pose_prior, pose_indices
+
+    motions = ["walk", "wave", "crouch"]
+    legs = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle", "left_foot",
+            "right_foot")
+    parted = build_parted_pose_prior(motions, config.pose_prior_floor_deg, legs)
+    leg_index = pose_indices(legs)
+    rest = np.setdiff1d(np.arange(69), leg_index)
+    assert sorted(np.concatenate([p[0].numpy() for p in parted.parts]).tolist()) == list(range(69))
+    pose = torch.as_tensor(builtin_motion("crouch", 30).body_pose[13:17])  # the deepest crouch
+    legs_alone = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=True, index=leg_index)
+    rest_alone = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=False, index=rest)
+    assert torch.allclose(parted.energy(pose), legs_alone.energy(pose[:, leg_index]) + rest_alone.energy(pose[:, rest]))
+    single = build_pose_prior(motions, config.pose_prior_floor_deg, mixture=False)
+    pulls = []
+    for candidate in (parted, single):
+        held = pose.clone().requires_grad_(True)
+        gradient = torch.autograd.grad(candidate.energy(held).sum(), held)[0]
+        pulls.append(gradient[:, leg_index].norm(dim=1))
+    assert (pulls[0] < 0.7 * pulls[1]).all()  # the crouching legs are pulled less
+    assert torch.allclose(parted.mean, single.mean) and "left_hip" in parted.description
+
+
 def test_joint_limits_accept_every_built_in_motion_and_refuse_bending_the_wrong_way():
     limits = joint_limits()
     for name in BUILTIN_MOTIONS:

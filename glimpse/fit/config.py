@@ -46,6 +46,7 @@ class FitConfig:
     pose_prior_motions: list[str]
     pose_prior_floor_deg: float
     pose_prior_mixture: bool
+    pose_prior_mixture_joints: list[str]
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]

@@ -32,7 +32,7 @@ from torch import Tensor
 from glimpse.fit.config import FitWeights
 from glimpse.fit.ground import height_above_plane
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.priors import JointLimits, PosePrior, shape_energy
+from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_energy
 
 HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
 MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
@@ -179,7 +179,7 @@ class FloorContact:
 class FitEnergy:
     """E(state) for a person's track; ``terms`` returns each term (for the report), ``__call__`` the sum."""
 
-    def __init__(self, body: KeypointBody, track: Track, prior: PosePrior, limits: JointLimits,
+    def __init__(self, body: KeypointBody, track: Track, prior: PosePrior | PartedPosePrior, limits: JointLimits,
                  weights: FitWeights, max_gap_frames: int):
         self.body, self.track, self.prior, self.limits, self.weights = body, track, prior, limits, weights
         self.max_gap_frames = max_gap_frames  # smoothness links frames at most this far apart

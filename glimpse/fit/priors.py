@@ -88,11 +88,46 @@ class PosePrior:
         return -2.0 * torch.logsumexp(-0.5 * (squared + self.log_det_excess), dim=-1)
 
 
+@dataclass(frozen=True)
+class PartedPosePrior:
+    """Independent priors over parts of body_pose: ``parts`` pairs each prior with the indices [D] of the 69
+    numbers it covers; the energy is their sum. ``mean`` [69] and ``description`` as PosePrior's."""
+
+    parts: tuple[tuple[Tensor, PosePrior], ...]
+    mean: Tensor
+    description: str
+
+    def energy(self, body_pose: Tensor) -> Tensor:
+        """[T, 69] -> [T]"""
+        return sum(prior.energy(body_pose[:, index]) for index, prior in self.parts)
+
+
+def pose_indices(joints: tuple[str, ...]) -> np.ndarray:
+    """Indices into body_pose (69) of the rotations of the named SMPL body joints."""
+    return np.array([3 * SMPL_BODY_JOINTS.index(name) + axis for name in joints for axis in range(3)])
+
+
+def build_parted_pose_prior(sources: list[str], floor_deg: float, mixture_joints: tuple[str, ...],
+                            dtype: torch.dtype = torch.float64) -> PartedPosePrior:
+    """A mixture (one Gaussian per motion) over the rotations of ``mixture_joints`` (for example the legs:
+    a crouch is not pulled towards the average of crouching and walking), one Gaussian over the other joints
+    (a waving arm keeps the broad pull of the single Gaussian)."""
+    mixed = pose_indices(mixture_joints)
+    rest = np.setdiff1d(np.arange(3 * len(SMPL_BODY_JOINTS)), mixed)
+    parts = ((torch.as_tensor(mixed), build_pose_prior(sources, floor_deg, dtype, True, mixed)),
+             (torch.as_tensor(rest), build_pose_prior(sources, floor_deg, dtype, False, rest)))
+    full = build_pose_prior(sources, floor_deg, dtype, False)
+    description = (f"a mixture of {len(sources)} Gaussians (one per motion) over the rotations of "
+                   f"{', '.join(mixture_joints)}, one Gaussian over the other joints, fitted to "
+                   f"{full.description.split(' fitted to ', 1)[1]}")
+    return PartedPosePrior(parts, full.mean, description)
+
+
 def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = torch.float64,
-                     mixture: bool = True) -> PosePrior:
+                     mixture: bool = True, index: np.ndarray | None = None) -> PosePrior:
     """Fit one Gaussian per motion (``mixture``) or one over all of them, to the motions' poses and their
-    mirror images; ``floor_deg`` is the standard deviation of the isotropic variance added to every
-    component's covariance."""
+    mirror images (the numbers ``index`` of body_pose, all 69 when None); ``floor_deg`` is the standard
+    deviation of the isotropic variance added to every component's covariance."""
     if not sources:
         raise ValueError("build_pose_prior: name at least one motion")
     groups = [[source] for source in sources] if mixture else [list(sources)]
@@ -100,6 +135,8 @@ def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = 
     for group in groups:
         poses = motion_poses(group)
         samples = np.concatenate([poses, mirror_body_pose(poses)])
+        if index is not None:
+            samples = samples[:, index]
         covariance = np.cov(samples, rowvar=False) + math.radians(floor_deg) ** 2 * np.eye(samples.shape[1])
         cholesky = np.linalg.cholesky(covariance)
         means.append(samples.mean(0))

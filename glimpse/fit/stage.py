@@ -31,7 +31,7 @@ from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
 from glimpse.fit.objective import FitEnergy, FitState, Track
-from glimpse.fit.priors import PosePrior, build_pose_prior, joint_limits
+from glimpse.fit.priors import PartedPosePrior, PosePrior, build_parted_pose_prior, build_pose_prior, joint_limits
 from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, summary
 from glimpse.io.images import frame_name
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
@@ -58,7 +58,7 @@ class Fitter:
         self.fit_scale = config.fit_scale == "always" or (config.fit_scale == "auto" and units == "sfm")
         self.undistorter = scene_undistorter(scene)
         self._bodies: dict[str, KeypointBody] = {}
-        self._prior: PosePrior | None = None
+        self._prior: PosePrior | PartedPosePrior | None = None
 
     def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
         """(frame_ids [T], layout, values [T, K, D+1]) of a person's 3D keypoints (world) or 2D keypoints
@@ -78,10 +78,15 @@ class Fitter:
         return self._bodies[layout]
 
     @property
-    def prior(self) -> PosePrior:
+    def prior(self) -> PosePrior | PartedPosePrior:
         if self._prior is None:
-            self._prior = build_pose_prior(self.config.pose_prior_motions, self.config.pose_prior_floor_deg,
-                                           self.model.dtype, self.config.pose_prior_mixture)
+            c = self.config
+            if c.pose_prior_mixture and c.pose_prior_mixture_joints:
+                self._prior = build_parted_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg,
+                                                      tuple(c.pose_prior_mixture_joints), self.model.dtype)
+            else:
+                self._prior = build_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg, self.model.dtype,
+                                               c.pose_prior_mixture)
         return self._prior
 
     def image_keypoints(self, person: HumanInputs) -> tuple[np.ndarray, np.ndarray] | None:
