@@ -345,3 +345,26 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     assert [p.label for p in people] == [1] and dropped == {"short": 1, "small": 1}
     report = tracks_report(people, dropped, {})
     assert report["dropped_short_tracks"] == 1 and report["dropped_small_tracks"] == 1
+
+
+def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.tracker import Observation, Track, Tracker
+
+    config = load_ingest_config()
+    region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
+    red, blue = np.zeros((2, 36)), np.zeros((2, 36))
+    red[:, 0], blue[:, 20] = 1.0, 1.0  # all their pixels in one, different, hue bin
+    tracker = Tracker.__new__(Tracker)
+    tracker.config, tracker.pose = config, None
+    monkeypatch.setattr(Tracker, "_find_new", lambda self, image, observed: [])
+    for found_look, followed in ((red, True), (blue, False)):
+        track = Track(0, _landmarks_at(np.full((BODY_LANDMARKS, 2), 100.0), region), red.copy())
+        tracker.tracks = [track]
+        seen = Observation(_landmarks_at(np.full((BODY_LANDMARKS, 2), 100.0), region), np.zeros((200, 200)),
+                           np.zeros((200, 200), bool), np.array([90.0, 60.0, 110.0, 140.0]), found_look, 1.0,
+                           np.ones((17, 3)))
+        monkeypatch.setattr(Tracker, "observe", lambda self, image, where, seen=seen: seen)
+        result = tracker.step(0, np.zeros((200, 200, 3), np.uint8))
+        assert (len(result) == 1) == followed and track.missing == (0 if followed else 1)

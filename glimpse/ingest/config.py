@@ -36,6 +36,7 @@ class IngestConfig:
     track_part_scale: float
     track_max_missing_frames: int
     track_reid_max_distance: float
+    track_follow_max_distance: float
     track_min_frames: int
     track_min_height: float
     track_switch_distance: float

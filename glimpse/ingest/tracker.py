@@ -3,7 +3,9 @@
 Per frame (BlazePose's own scheme, extended to several people):
 
 1. **Follow.** Every track looks for its person in the region its last landmarks predicted (moved by the
-   track's velocity); the landmark model's presence score says whether the person is still there.
+   track's velocity); the landmark model's presence score says whether the person is still there, and
+   whoever is there must look like the track (``track_follow_max_distance``), else the region slid onto
+   someone else.
 2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
    someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
    behind*: its region again with the people already found painted over by the background plate (grey for a
@@ -243,7 +245,9 @@ class Tracker:
         followed: dict[int, Observation] = {}
         for track in live:
             observation = self.observe(image, track.predicted_region())
-            if observation is not None:
+            if observation is None:
+                continue
+            if appearance_distance(track.look, observation.look) <= config.track_follow_max_distance:
                 followed[track.index] = observation
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
         for track in live:
