@@ -359,7 +359,8 @@ def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -
     tracker = Tracker.__new__(Tracker)
     tracker.config, tracker.pose = config, None
     monkeypatch.setattr(Tracker, "_find_new", lambda self, image, observed: [])
-    for found_look, followed in ((red, True), (blue, False)):
+    unseen = np.full((2, 36), np.nan)  # no pixels to tell by: followed, as before
+    for found_look, followed in ((red, True), (blue, False), (unseen, True)):
         track = Track(0, _landmarks_at(np.full((BODY_LANDMARKS, 2), 100.0), region), red.copy())
         tracker.tracks = [track]
         seen = Observation(_landmarks_at(np.full((BODY_LANDMARKS, 2), 100.0), region), np.zeros((200, 200)),

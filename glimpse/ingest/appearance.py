@@ -37,6 +37,11 @@ def appearance(image: np.ndarray, mask: np.ndarray, split_y: float, bins: int) -
     return np.stack(halves)
 
 
+def comparable(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two appearances share a half that both have (else their distance says nothing)."""
+    return any(not (np.isnan(half_a).any() or np.isnan(half_b).any()) for half_a, half_b in zip(a, b))
+
+
 def appearance_distance(a: np.ndarray, b: np.ndarray) -> float:
     """Hellinger distance between two appearances, averaged over the halves both have; 1 when none."""
     distances = []

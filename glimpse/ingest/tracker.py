@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from glimpse.ingest.appearance import appearance, appearance_distance, blend
+from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
 from glimpse.ingest.blazepose import (
     REGION_GROW,
     BlazePose,
@@ -247,7 +247,8 @@ class Tracker:
             observation = self.observe(image, track.predicted_region())
             if observation is None:
                 continue
-            if appearance_distance(track.look, observation.look) <= config.track_follow_max_distance:
+            if (not comparable(track.look, observation.look)
+                    or appearance_distance(track.look, observation.look) <= config.track_follow_max_distance):
                 followed[track.index] = observation
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
         for track in live:
