@@ -369,3 +369,28 @@ def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -
         monkeypatch.setattr(Tracker, "observe", lambda self, image, where, seen=seen: seen)
         result = tracker.step(0, np.zeros((200, 200, 3), np.uint8))
         assert (len(result) == 1) == followed and track.missing == (0 if followed else 1)
+
+
+def test_a_checkpoint_round_trips_and_a_foreign_or_broken_one_is_not_used(tmp_path) -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.checkpoint import load_checkpoint, save_checkpoint
+    from glimpse.ingest.tracker import Track
+
+    rng = np.random.default_rng(0)
+    region = Region(np.array([100.0, 120.0]), 80.0, 0.3)
+    track = Track(3, _landmarks_at(rng.normal(size=(BODY_LANDMARKS, 2)), region), rng.random((2, 36)),
+                  velocity=np.array([1.5, -0.5]), missing=2, frames=[4, 5], keypoints=[rng.random((17, 3))] * 2,
+                  relative3d=[rng.random((17, 4))] * 2, boxes=[rng.random(4)] * 2, reidentified=[(5, 0.25)],
+                  jumps=[5])
+    path = tmp_path / "checkpoint.npz"
+    save_checkpoint(path, [track], 6, "key")
+    (loaded,), done = load_checkpoint(path, "key")
+    assert done == 6 and (loaded.index, loaded.missing, loaded.frames, loaded.jumps) == (3, 2, [4, 5], [5])
+    assert loaded.reidentified == [(5, 0.25)] and np.array_equal(loaded.look, track.look)
+    assert np.array_equal(loaded.landmarks.points, track.landmarks.points)
+    restored = loaded.landmarks.region
+    assert np.array_equal(restored.centre, region.centre) and (restored.side, restored.angle) == (80.0, 0.3)
+    assert np.array_equal(loaded.keypoints[1], track.keypoints[1])
+    assert load_checkpoint(path, "another video") is None
+    path.write_bytes(b"not a checkpoint")
+    assert load_checkpoint(path, "key") is None

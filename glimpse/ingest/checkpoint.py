@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -20,6 +22,8 @@ from glimpse.ingest.blazepose import PoseLandmarks
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region
 from glimpse.ingest.tracker import Track
+
+log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
 NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames")  # changing these keeps a checkpoint valid
@@ -78,14 +82,18 @@ def save_checkpoint(path: Path, tracks: list[Track], frames_done: int, key: str)
 
 
 def load_checkpoint(path: Path, key: str) -> tuple[list[Track], int] | None:
-    """(tracks, frames done) from ``path``, or None when there is none or it was made for another video or
-    other parameters (``key``: :func:`fingerprint`)."""
+    """(tracks, frames done) from ``path``, or None when there is none, it was made for another video or
+    other parameters (``key``: :func:`fingerprint`), or it cannot be read (then the ingest starts afresh)."""
     if not path.exists():
         return None
-    with np.load(path, allow_pickle=False) as data:
-        if str(data["fingerprint"]) != key:
-            return None
-        arrays = {name: data[name] for name in data.files}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if str(data["fingerprint"]) != key:
+                return None
+            arrays = {name: data[name] for name in data.files}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as error:
+        log.warning("%s: not a readable ingest checkpoint (%s); tracking starts from the first frame", path, error)
+        return None
     tracks = []
     for k in range(int(arrays["track_count"])):
         prefix = f"track{k}/"
