@@ -76,11 +76,7 @@ def true_people(scene_dir: Path, layouts: tuple[str, ...]) -> dict[str, dict[int
                                render_meshes([Mesh(vertices, faces, np.ones_like(vertices))], K, R, t, w, h,
                                              supersample=1).depth, K, R, t)
             for layout, coco in maps.items():
-                joints = coco(posed.joints, posed.vertices)[0].numpy()
-                cam = joints @ R.T + t
-                uv = cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
-                px = np.round(uv).astype(int)
-                inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+                uv, px, _, inside = _project(coco(posed.joints, posed.vertices)[0].numpy(), K, R, t, w, h)
                 visible = inside.copy()
                 visible[inside] = grown[px[inside, 1], px[inside, 0]]
                 out[layout].setdefault(fid, {})[pid] = TruePerson(mask, uv, visible, in_view)
@@ -91,14 +87,23 @@ def _in_view(points: np.ndarray, vertices: np.ndarray, body_depth: np.ndarray, K
              t: np.ndarray) -> np.ndarray:
     """[J] bool: points [J, 3] (world, on or under the skin of the body whose posed vertices [V, 3] rendered
     alone give body_depth [H, W]) that are not behind that body (glimpse.ingest.evaluate.in_front_of_own_body)."""
-    cam = points @ R.T + t
-    px = np.round(cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]).astype(int)
     h, w = body_depth.shape
-    inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+    _, px, depth, inside = _project(points, K, R, t, w, h)
     front = np.zeros(len(points))
     front[inside] = body_depth[px[inside, 1], px[inside, 0]]
     under_skin = np.linalg.norm(vertices[None] - points[:, None], axis=2).min(axis=1)
-    return in_front_of_own_body(cam[:, 2], front, under_skin, OWN_BODY_MARGIN_M)
+    return in_front_of_own_body(depth, front, under_skin, OWN_BODY_MARGIN_M)
+
+
+def _project(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, w: int, h: int
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """World points [J, 3] through a pinhole camera -> (pixels [J, 2], nearest pixel [J, 2] int, camera depth
+    [J], [J] bool: in front of the camera and on a pixel of the w x h image)."""
+    cam = points @ R.T + t
+    uv = cam[:, :2] / cam[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
+    px = np.round(uv).astype(int)
+    inside = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+    return uv, px, cam[:, 2], inside
 
 
 def found_people(scene_dir: Path) -> dict[int, dict[str, FoundPerson]]:

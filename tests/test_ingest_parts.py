@@ -205,14 +205,14 @@ def test_joints_behind_the_persons_own_body_are_not_counted_in_pck_but_reported(
 
 
 def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
-    from glimpse.ingest.blazepose import pair_sides_like
+    from glimpse.ingest.blazepose import sides_to_swap, swap_sides
 
     reference = np.zeros((LANDMARK_COUNT, LANDMARK_VALUES))
     reference[25, :2], reference[26, :2] = [100, 200], [140, 200]  # left and right knee
     other = reference.copy()
     other[[25, 26]] = other[[26, 25]]  # the mirrored run called them the other way round
     other[0, :2] = [5, 5]
-    paired = pair_sides_like(reference.ravel(), other.ravel()).reshape(-1, LANDMARK_VALUES)
+    paired = swap_sides(other, sides_to_swap(reference.ravel(), other.ravel()))
     np.testing.assert_allclose(paired[[25, 26], :2], reference[[25, 26], :2])
     np.testing.assert_allclose(paired[0, :2], [5, 5])  # unpaired landmarks untouched
 

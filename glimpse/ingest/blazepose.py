@@ -222,16 +222,10 @@ def unmirror(raw: np.ndarray, world: np.ndarray, segmentation: np.ndarray) -> tu
     return values.ravel(), points.ravel(), segmentation[:, ::-1]
 
 
-def pair_sides_like(reference: np.ndarray, other: np.ndarray) -> np.ndarray:
-    """``other``'s landmarks ([39 * 5] raw values) with each left/right pair swapped where that brings them closer
-    to ``reference``'s: the model may call a side-on person's left what its mirrored run calls right, and
-    averaging across that would put a knee between the knees."""
-    return swap_sides(other.reshape(-1, LANDMARK_VALUES), sides_to_swap(reference, other)).ravel()
-
-
 def sides_to_swap(reference: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
     """The left/right landmark pairs of ``other`` ([39 * 5] raw values) that lie closer to ``reference``'s
-    swapped than as named (see :func:`pair_sides_like`)."""
+    swapped than as named: the model may call a side-on person's left what its mirrored run calls right, and
+    averaging across that would put a knee between the knees (see :func:`swap_sides`)."""
     ref, out = reference.reshape(-1, LANDMARK_VALUES), other.reshape(-1, LANDMARK_VALUES)
     pairs = []
     for left, right in MIRROR_PAIRS:
