@@ -44,7 +44,9 @@ endif
 
 PY := $(VENV)/bin/python
 export PYTHONPATH := $(CURDIR)$(if $(PYTHONPATH),:$(PYTHONPATH))
+# OpenMP's idle threads sleep, after spinning about 0.1 ms (glimpse/__init__.py says why; it sets the same defaults).
 export OMP_WAIT_POLICY ?= passive
+export GOMP_SPINCOUNT ?= 10000
 
 # BlazePose's models for the ingest, taken out of the mediapipe wheel by `make models`.
 MODELS_DIR ?= models/blazepose

@@ -17,10 +17,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-os.environ.setdefault("OMP_WAIT_POLICY", "passive")  # before torch loads OpenMP: busy-waiting crawls on shared cores
-import torch  # noqa: E402
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import glimpse  # noqa: E402,F401  (sets OpenMP's waiting before torch loads it)
+import torch  # noqa: E402
 
 THREADS = 2
 SEED = 0

@@ -8,7 +8,7 @@ manifests hold their wall times. This prints both as tables: milliseconds per it
 share of the training time. Phases that call the rasterizer: render (projection, binning, compositing
 forward) and backward (every gradient, the compositor's among them: bench/raster.py times it alone).
 
-    .venv/bin/python bench/profile.py [--size small|full] [--params "section.key=value ..."] [--work DIR]
+    .venv/bin/python bench/phase_profile.py [--size small|full] [--params "section.key=value ..."] [--work DIR]
 """
 
 from __future__ import annotations

@@ -38,7 +38,6 @@ def resolved_threads(config: ComputeConfig) -> int:
 def apply_compute(config: ComputeConfig) -> None:
     """Seed every generator and set thread counts; call once at stage start."""
     threads = resolved_threads(config)
-    os.environ.setdefault("OMP_WAIT_POLICY", "passive")  # busy-waiting is 10-20x slower on shared cores
     random.seed(config.seed)
     np.random.seed(config.seed)
     try:

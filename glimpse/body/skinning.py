@@ -26,6 +26,7 @@ from functools import cached_property
 import numpy as np
 import torch
 import torch.nn.functional as F
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 from torch import Tensor
 
@@ -60,7 +61,11 @@ def idw_skin_weights(points: np.ndarray, vertices: np.ndarray, vertex_weights: n
     inverse[on_vertex] = 0.0
     inverse[on_vertex, 0] = 1.0
     inverse /= inverse.sum(1, keepdims=True)
-    return np.einsum("nk,nkj->nj", inverse, vertex_weights[nearest])
+    # One sparse [N, V] matrix of the neighbours' shares times the [V, J] weights: the same sums as gathering
+    # [N, k, J] neighbour weights, without the gathered copy (1.5 GB for a 64^3 grid at k = 30)
+    shares = csr_matrix((inverse.ravel(), nearest.ravel(), np.arange(0, len(points) * k + 1, k)),
+                        shape=(len(points), len(vertices)))
+    return np.asarray(shares @ vertex_weights)
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.sparse import coo_matrix, diags
-from scipy.sparse.linalg import cg, spsolve
+from scipy.sparse.linalg import spsolve
 
 MIN_ANCHOR = 1e-6  # smallest pull towards the anchors (keeps vertices cut off from every known one defined)
-CG_RTOL = 1e-10  # conjugate gradients stop at this residual, relative to the right-hand side
+CG_RTOL = 1e-6  # conjugate gradients stop at this residual, relative to the right-hand side (colours in 0..1:
+#   about 1e-5 from the exact solution, far below an 8-bit level)
 CG_MAX_ITERATIONS = 2000  # beyond this many steps a column is solved directly
 
 
@@ -86,14 +87,15 @@ def part_means(values: np.ndarray, known: np.ndarray, groups: np.ndarray,
 
 
 def screened_fill(values: np.ndarray, confidence: np.ndarray, graph, anchors: np.ndarray | None = None,
-                  anchor_weight: float = 0.0) -> np.ndarray:
+                  anchor_weight: float = 0.0, initial: np.ndarray | None = None) -> np.ndarray:
     """values [V, C] (read where ``confidence [V]`` > 0) -> [V, C] minimising, over every vertex not held
     exactly (``confidence`` inf), the graph's Dirichlet energy on ``graph`` [V, V] (body_graph) plus
     ``confidence x (x - value)^2`` at the vertices with data and ``anchor_weight x (x - anchor)^2`` at those
     without (``anchors [V, C]``, default: the mean of the data, a held vertex weighing 1 and the others their
     confidence). A vertex whose data is
     weak (little opacity behind its colour) is smoothed by its neighbours; with infinite confidence this is
-    the screened harmonic extension from the known vertices. With no data the values come back unchanged."""
+    the screened harmonic extension from the known vertices. With no data the values come back unchanged.
+    ``initial [V, C]``: where the solver starts (an earlier fill of nearly the same data: fewer steps)."""
     held = np.isinf(confidence)
     has_data = held | (confidence > 0)
     if held.all() or not has_data.any():
@@ -113,15 +115,41 @@ def screened_fill(values: np.ndarray, confidence: np.ndarray, graph, anchors: np
         laplacian = laplacian[free][:, free]
     system = laplacian + diags(data + pull, format="csr")
     filled = values.copy()
-    filled[free] = _solve(system.tocsr(), right.reshape(int(free.sum()), -1))
+    start = None if initial is None else np.asarray(initial, np.float64)[free].reshape(int(free.sum()), -1)
+    filled[free] = _solve(system.tocsr(), right.reshape(int(free.sum()), -1), start)
     return filled
 
 
-def _solve(system, right: np.ndarray) -> np.ndarray:
-    """system [n, n] (symmetric positive definite) x = right [n, C]: conjugate gradients per column (a few
-    times faster than a direct solve on a body's graph), a direct solve for a column they do not settle."""
-    columns = []
-    for column in right.T:
-        solution, info = cg(system, column, rtol=CG_RTOL, atol=0.0, maxiter=CG_MAX_ITERATIONS)
-        columns.append(solution if info == 0 else spsolve(system.tocsc(), column))
-    return np.stack(columns, axis=1)
+def _solve(system, right: np.ndarray, initial: np.ndarray | None = None) -> np.ndarray:
+    """system [n, n] (symmetric positive definite) x = right [n, C], from ``initial [n, C]`` (default zeros):
+    conjugate gradients with a Jacobi preconditioner, every column at once (a few times faster than a direct
+    solve on a body's graph), a direct solve for the columns they do not settle."""
+    right = np.ascontiguousarray(right.T)  # [C, n]: one contiguous row per column, for the row-wise sums below
+
+    def apply(rows: np.ndarray) -> np.ndarray:
+        return np.stack([system @ row for row in rows])
+
+    solution = np.zeros_like(right) if initial is None else np.array(initial.T, dtype=np.float64, order="C")
+    residual = right - apply(solution)
+    settled = CG_RTOL * np.sqrt((right * right).sum(1))
+    inverse_diagonal = 1.0 / system.diagonal()
+    preconditioned = inverse_diagonal * residual
+    direction = preconditioned.copy()
+    product = (residual * preconditioned).sum(1)
+    for _ in range(CG_MAX_ITERATIONS):
+        active = np.sqrt((residual * residual).sum(1)) > settled
+        if not active.any():
+            break
+        image = apply(direction)
+        curvature = (direction * image).sum(1)
+        step = np.divide(product, curvature, out=np.zeros_like(product), where=active & (curvature > 0))
+        solution += step[:, None] * direction
+        residual -= step[:, None] * image
+        preconditioned = inverse_diagonal * residual
+        new_product = (residual * preconditioned).sum(1)
+        ratio = np.divide(new_product, product, out=np.zeros_like(product), where=product > 0)
+        direction = preconditioned + ratio[:, None] * direction
+        product = new_product
+    for column in np.flatnonzero(np.sqrt((residual * residual).sum(1)) > settled):
+        solution[column] = spsolve(system.tocsc(), right[column])
+    return solution.T

@@ -131,6 +131,7 @@ class SurfacePrior(UnseenPrior):
     def _refresh_colours(self, person: PersonGaussians, step: int) -> None:
         """The seen vertices' colours from their Gaussians, completed over the rest of the body."""
         state = self.people[person.pid]
+        previous = state.vertex_colours.double().cpu().numpy() if state.coloured_at > 0 else None
         state.nearest, state.coloured_at = None, step
         nearest = self._nearest(person)
         weights = person.model.opacities().detach()
@@ -143,7 +144,7 @@ class SurfacePrior(UnseenPrior):
         opacity_mass = mass.double().cpu().numpy()
         anchors = part_means(mean, known, self.groups, self.parent_group, self.config.part_min_seen, opacity_mass)
         confidence = np.where(known, self.config.colour_confidence * opacity_mass, 0.0)
-        filled = screened_fill(mean, confidence, self.graph, anchors, self.config.part_anchor)
+        filled = screened_fill(mean, confidence, self.graph, anchors, self.config.part_anchor, initial=previous)
         state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
 
     def state_dict(self) -> dict:
