@@ -21,18 +21,30 @@ class AutoScheduleScale:
 @dataclass(frozen=True)
 class ComputeConfig:
     device: Literal["auto", "cpu", "cuda"]
-    threads: int  # CPU threads for torch, OpenMP and COLMAP; 0 = every core
+    threads: int | Literal["auto"]  # CPU threads for torch, OpenMP and COLMAP; auto (or 0): usable_cores()
     seed: int
     frame_cache: int  # input frames (image and masks) stages 04 and 06 keep decoded, on the compute device
     frame_read_ahead: int  # frames read ahead of the training loop on a background thread (< frame_cache)
     auto_schedule_scale: AutoScheduleScale
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on: its affinity, which is what Slurm, a container or taskset grants
+    (os.cpu_count() counts the whole machine's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this platform (macOS)
+        return os.cpu_count() or 1
+
+
 def resolved_threads(config: ComputeConfig) -> int:
-    """Number of CPU threads to use (``threads: 0`` means all cores)."""
+    """Number of CPU threads to use: ``threads``, or with ``auto`` (or 0) every core this process may use, on
+    the CPU and on CUDA alike (there the CPU prepares frames, fits bodies and runs COLMAP)."""
+    if config.threads == "auto" or config.threads == 0:
+        return usable_cores()
     if config.threads < 0:
-        raise ValueError(f"compute.threads must be >= 0, found {config.threads}")
-    return config.threads or (os.cpu_count() or 1)
+        raise ValueError(f"compute.threads must be >= 0 or auto, found {config.threads}")
+    return config.threads
 
 
 def apply_compute(config: ComputeConfig) -> None:

@@ -18,8 +18,7 @@ from scipy.sparse import coo_matrix, diags
 from scipy.sparse.linalg import spsolve
 
 MIN_ANCHOR = 1e-6  # smallest pull towards the anchors (keeps vertices cut off from every known one defined)
-CG_RTOL = 1e-6  # conjugate gradients stop at this residual, relative to the right-hand side (colours in 0..1:
-#   about 1e-5 from the exact solution, far below an 8-bit level)
+CG_RTOL = 1e-10  # conjugate gradients stop at this residual, relative to the right-hand side
 CG_MAX_ITERATIONS = 2000  # beyond this many steps a column is solved directly
 
 
