@@ -1,10 +1,11 @@
 """The C++ kernels (csrc/: tile binning and compositing, projection, covariances and SH colours, posing
-people for training and frozen ones for rendering): built on first use, cached.
+people for training and frozen ones for rendering): built when the environment is set up (make venv runs
+``python -m glimpse.render.composite_cpu``; about a minute and a half on two cores), else on first use; cached.
 
-The build cache is keyed by the source, the flags and torch's version, under
+The build cache is keyed by the source, the flags, torch's version and its path, under
 $GLIMPSE_CACHE (default ~/.cache/glimpse). The sources are copied into it and built from
-there, so every checkout of one version shares one build (torch's loader records the
-sources' paths). One process builds at a time, under a lock (glimpse.locks) that a killed
+there, so every checkout that uses one environment shares one build (torch's loader records the
+sources' paths and torch's). One process builds at a time, under a lock (glimpse.locks) that a killed
 build never leaves behind; a process that waits longer than $GLIMPSE_BUILD_WAIT_S seconds
 (default 900) stops with a message naming the builder. Flags are portable (-O3 -mavx2 -mfma, plus
 three that allow vectorised selects, see COMMON_FLAGS;
@@ -65,7 +66,9 @@ def _build_wait_s() -> float:
 def _build(flags: list[str]) -> ModuleType:
     from torch.utils.cpp_extension import load
 
-    digest = hashlib.sha256(" ".join(flags).encode() + torch.__version__.encode())
+    # torch's own path is in the build's commands: each environment gets its build (one shared by two checkouts'
+    # environments would be rebuilt, a minute each time, whenever the other ran)
+    digest = hashlib.sha256(" ".join(flags).encode() + torch.__version__.encode() + torch.__file__.encode())
     for source in SOURCES + HEADERS:
         digest.update(source.read_bytes())
     key = digest.hexdigest()[:12]
@@ -148,3 +151,7 @@ def composite_cpu(means2d: Tensor, conics: Tensor, opacities: Tensor, features: 
                   bins: TileBins, width: int, height: int) -> Tensor:
     """features [N, C] composited front to back per pixel -> image [H, W, C] (float32, no background)."""
     return _Composite.apply(means2d, conics, opacities, features, extents, bins, width, height)
+
+
+if __name__ == "__main__":  # make venv: build the kernels now rather than in the first stage that renders
+    print("the C++ kernels:", "built" if available() else "not built (render.backend torch will be used)")
