@@ -31,10 +31,44 @@ import shutil
 import sys
 from pathlib import Path
 
-from glimpse.errors import GlimpseError
+from glimpse.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_STAGE_FAILED, GlimpseError
 
-# Exit status of `glimpse run` when a stage failed (bad input is 2).
-STAGE_FAILED = 1
+EXIT_STATUSES = f"""exit statuses: 0 done; {EXIT_STAGE_FAILED} a stage failed (glimpse run); 2 the command line is wrong;
+  {EXIT_BAD_INPUT} bad input (a scene, parameter, file or run folder: the message names it); {EXIT_INTERRUPTED} interrupted
+  (rerun the same command: finished stages and checkpoints are kept)"""
+
+# One example per command, shown by `glimpse COMMAND --help`.
+EXAMPLES = {
+    "ingest": "glimpse ingest clip.mp4 runs/scenes/clip   # then: glimpse run --scene runs/scenes/clip",
+    "validate": "glimpse validate runs/scenes/demo_small",
+    "run": 'glimpse run --scene runs/scenes/demo_small --params "06_joint_opt.schedule_scale=0.05"\n'
+           "  glimpse run --video clip.mp4                 # ingest (when the video is newer), then every stage\n"
+           "  glimpse run --scene S --stage 06_joint_opt   # rerun one stage (and what it needs)",
+    "clean-stage": "glimpse clean-stage --scene runs/scenes/demo_small 06_joint_opt",
+    "prepare": "glimpse prepare --scene runs/scenes/demo_small --whole-pipeline",
+    "params": "glimpse params --scene runs/scenes/demo_small --stage 04_bg_pretrain",
+    "run-dir": "glimpse run-dir --scene runs/scenes/demo_small   # -> runs/demo_small",
+    "export": "glimpse export runs/demo_small --frame 12 --sh-degree 3",
+    "render": "glimpse render runs/demo_small --camera orbit:30 --time 12 --remove p1 --out orbit.mp4\n"
+              "  glimpse render runs/demo_small --motion p0=builtin:walk --out walk.mp4",
+}
+
+
+def _version() -> str:
+    from glimpse.pipeline.runner import code_version
+
+    return f"glimpse {code_version()}"
+
+
+class _VersionAction(argparse.Action):
+    """--version, computed only when asked (it runs git)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, help="print the version (and git commit) and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(_version())
+        parser.exit()
 
 
 def _params_default() -> str:
@@ -42,17 +76,25 @@ def _params_default() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="glimpse", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
-    p_ingest = sub.add_parser("ingest", help="a video -> a glimpse-scene/1 folder (docs/ingest.md)")
+    raw = argparse.RawDescriptionHelpFormatter
+    parser = argparse.ArgumentParser(prog="glimpse", description=__doc__, formatter_class=raw, epilog=EXIT_STATUSES)
+    parser.add_argument("--version", action=_VersionAction)
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help: str) -> argparse.ArgumentParser:
+        """A command's parser: its help, then its example and the exit statuses."""
+        return commands.add_parser(name, help=help, description=help, formatter_class=raw,
+                                   epilog=f"example:\n  {EXAMPLES[name]}\n\n{EXIT_STATUSES}")
+
+    p_ingest = command("ingest", "a video -> a glimpse-scene/1 folder (docs/ingest.md)")
     p_ingest.add_argument("video", type=Path)
     p_ingest.add_argument("scene", nargs="?", default="", help="the scene folder to write (replaced when the ingest "
                                                                "succeeds; default OUT/scenes/<video name>)")
     p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
-    p_val = sub.add_parser("validate", help="check a scene folder against glimpse-scene/1")
+    p_val = command("validate", "check a scene folder against glimpse-scene/1")
     p_val.add_argument("scene", type=Path)
-    p_run = sub.add_parser("run", help="run the stages that are out of date (what make all and make <stage> call)")
+    p_run = command("run", "run the stages that are out of date (what make all and make <stage> call)")
     p_run.add_argument("--scene", default="", help="scene folder (glimpse-scene/1); with --video, where it goes")
     p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it")
     p_run.add_argument("--out", type=Path, default=Path("runs"))
@@ -60,12 +102,14 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
     p_run.add_argument("--wait", type=float, default=None, help="seconds to wait when another run holds the run "
                                                                 "folder (default $GLIMPSE_LOCK_WAIT, else 0)")
-    p_clean = sub.add_parser("clean-stage", help="remove one stage's output (make clean-stage)")
+    p_clean = command("clean-stage", "remove one stage's output (make clean-stage)")
     p_clean.add_argument("--scene", required=True, type=Path)
     p_clean.add_argument("--out", type=Path, default=Path("runs"))
     p_clean.add_argument("stage")
+    helps = {"prepare": "validate, resolve the parameters and write the run folder's records; print its path",
+             "params": "print the resolved parameters one stage reads", "run-dir": "print the run folder's path"}
     for name in ("prepare", "params", "run-dir"):
-        p = sub.add_parser(name)
+        p = command(name, helps[name])
         p.add_argument("--scene", required=True, type=Path)
         p.add_argument("--out", type=Path, default=Path("runs"))
         p.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
@@ -74,13 +118,13 @@ def main(argv: list[str] | None = None) -> int:
         if name == "prepare":
             p.add_argument("--whole-pipeline", action="store_true",
                            help="also refuse a scene the pipeline cannot run to the end (make all)")
-    p_export = sub.add_parser("export", help="a finished run's Gaussians and cameras for other tools")
+    p_export = command("export", "a finished run's Gaussians and cameras for other tools")
     p_export.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
     p_export.add_argument("--frame", type=int, default=None, help="input frame id (default: the middle one)")
     p_export.add_argument("--out", type=Path, default=None, help="default: RUN/export")
     p_export.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
                           help="SH degree of the posed PLYs (default: as trained; 3 for INRIA's SIBR viewer)")
-    p_render = sub.add_parser("render", help="render a finished run along a camera path (docs/renders.md)")
+    p_render = command("render", "render a finished run along a camera path (docs/renders.md)")
     p_render.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
     p_render.add_argument("--camera", default="input", help="input | orbit[:DEGREES] | heldout:NAME | json:FILE | "
                                                              "colmap:FOLDER (default: input)")
@@ -101,7 +145,11 @@ def main(argv: list[str] | None = None) -> int:
         return _dispatch(args)
     except GlimpseError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("interrupted: rerun the same command to go on (finished stages and checkpoints are kept)",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _dispatch(args: argparse.Namespace) -> int:
@@ -195,7 +243,7 @@ def _run(args: argparse.Namespace) -> int:
     stages_dir = os.environ.get("GLIMPSE_STAGES_DIR") or None
     status = run_stages(scene, args.out, args.params, args.stage, sys.executable,
                         Path(stages_dir) if stages_dir else None, args.wait)
-    return STAGE_FAILED if status else 0
+    return EXIT_STAGE_FAILED if status else 0
 
 
 if __name__ == "__main__":

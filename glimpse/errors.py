@@ -5,6 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+# Exit statuses of `glimpse` and of every stage (README, "Exit statuses"): scripts and schedulers branch on them.
+EXIT_STAGE_FAILED = 1  # a stage of `glimpse run` / make failed: its message is above, its finished outputs are kept
+EXIT_USAGE = 2  # the command line is wrong (argparse's own status)
+EXIT_BAD_INPUT = 3  # a scene, parameter, file or run folder is not what it must be: one message names it and the rule
+EXIT_INTERRUPTED = 130  # stopped by Ctrl-C or SIGINT (128 + 2, the shell's convention); rerun to resume
+
+
 class GlimpseError(Exception):
     """Bad input or a stage that cannot run; the message says what to fix."""
 

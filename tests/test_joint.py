@@ -18,7 +18,7 @@ from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams, read_body_params
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
-from glimpse.errors import ConfigError
+from glimpse.errors import EXIT_BAD_INPUT, ConfigError
 from glimpse.eval.never_seen import PosedBodies
 from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
 from glimpse.eval.views import ViewSet, heldout_views
@@ -280,7 +280,7 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
     image = next(i for i in model.images.values() if i.name == "000003.png")
     assert np.allclose(image.cam_from_world().rotation.matrix(), finished.cameras[3].R, atol=1e-6)
     assert model.cameras[image.camera_id].width == finished.width
-    assert cli(["export", str(tmp_path / "nothing")]) == 2
+    assert cli(["export", str(tmp_path / "nothing")]) == EXIT_BAD_INPUT
     assert "no finished stage 06" in capsys.readouterr().err
 
 

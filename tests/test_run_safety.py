@@ -16,6 +16,7 @@ import pytest
 import torch
 from PIL import Image
 
+from glimpse.errors import EXIT_BAD_INPUT
 from glimpse.io.checkpoint import CHECKPOINT_FORMAT, load_checkpoint, save_checkpoint
 from glimpse.locks import LockBusy, exclusive_lock, read_holder
 from glimpse.pipeline.runner import remove_orphans, temp_name
@@ -158,7 +159,7 @@ def test_a_second_run_on_a_busy_folder_stops_and_a_killed_run_is_taken_over(setu
                          r"Wait for it to finish, or ask to wait: make WAIT=<seconds>", second.stderr), second.stderr
         direct = subprocess.run([sys.executable, str(REPO / "stages" / "03_masks" / "run.py"), "--scene", str(scene),
                                  "--out", str(out)], env=env, capture_output=True, text=True)
-        assert direct.returncode == 2 and "in use by pid" in direct.stderr  # a stage started by hand waits its turn
+        assert direct.returncode == EXIT_BAD_INPUT and "in use by pid" in direct.stderr  # a stage started by hand waits its turn
         assert len(list((out / "tiny" / ".tmp").iterdir())) == 1  # the live run's folder was left alone
     finally:
         os.killpg(first.pid, signal.SIGKILL)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from glimpse.cli import main
-from glimpse.errors import SceneNotRunnable
+from glimpse.errors import EXIT_BAD_INPUT, SceneNotRunnable
 from glimpse.pipeline.prepare import prepare_run
 from glimpse.scene import SceneWriter, validate_scene
 from glimpse.scene.runnable import runnable_violations
@@ -44,7 +44,7 @@ def test_a_person_with_masks_only_is_refused_at_prepare(tmp_path: Path, capsys: 
     assert "glimpse ingest" in str(caught.value)
     assert not (tmp_path / "out" / "tiny").exists()  # stopped before any stage
     prepare_run(root, tmp_path / "out")  # one stage alone (make 01_sfm) may still run: stage 01 needs only masks
-    assert main(["validate", str(root)]) == 2
+    assert main(["validate", str(root)]) == EXIT_BAD_INPUT
     assert "humans/p1/: a person needs smpl.npz, keypoints2d.npz or keypoints3d.npz" in capsys.readouterr().err
 
 

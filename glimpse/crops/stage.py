@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from glimpse.body.keypoints import KeypointMap, keypoint_map
 from glimpse.body.model import NUM_JOINTS, BodyModel
@@ -35,6 +34,7 @@ from glimpse.crops.box import (
 )
 from glimpse.crops.config import CropsConfig
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
+from glimpse.io.progress import progress
 from glimpse.prior import resolve_prior_kind
 from glimpse.prior.skeleton import (
     HEAD_JOINT,
@@ -164,7 +164,7 @@ def person_crops(inputs: CropsInputs, config: CropsConfig, seed: int, pid: str, 
     frames = frame_files(inputs.frames_dir)
     index = inputs.pids.index(pid)
     entries = []
-    for k, fid in enumerate(tqdm(chosen, desc=f"05 crops {pid}", unit="crop", leave=False)):
+    for k, fid in enumerate(progress(chosen, desc=f"05 crops {pid}", unit="crop", leave=False)):
         name = frame_name(fid)
         mask = read_mask(inputs.masks_dir / pid / f"{name}.png")
         crop = make_crop(read_rgb(frames[fid]), mask, square_box(mask, config.crop_margin), inputs.cameras[fid],
@@ -193,7 +193,7 @@ def person_summary(doc: dict, min_mask_px: int) -> dict:
 def write_crops(inputs: CropsInputs, config: CropsConfig, seed: int, out: Path) -> dict[str, dict]:
     """Every person's ``out/<pid>/crops/`` (crops.json even when empty); returns pid -> document."""
     docs = {}
-    for pid in tqdm(inputs.pids, desc="05_textual_inversion", unit="person"):
+    for pid in progress(inputs.pids, desc="05_textual_inversion", unit="person"):
         folder = out / pid / "crops"
         docs[pid] = person_crops(inputs, config, seed, pid, folder)
         folder.mkdir(parents=True, exist_ok=True)

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from glimpse.body.model import BodyModel
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.overlay import PERSON_COLOURS, OverlayBody, overlay_frame
 from glimpse.io.images import frame_files, read_rgb
+from glimpse.io.progress import progress
 from glimpse.io.video import write_mp4
 from glimpse.scene import Scene
 
@@ -26,7 +26,7 @@ def write_overlay_video(path: Path, scene: Scene, model: BodyModel, cameras: dic
     rows = {fit.pid: {int(f): i for i, f in enumerate(fit.params.frame_ids)} for fit in fits}
 
     def frames():
-        for fid in tqdm(sorted(cameras), desc="02_smpl_fit overlay", unit="frame", leave=False):
+        for fid in progress(sorted(cameras), desc="02_smpl_fit overlay", unit="frame", leave=False):
             bodies = []
             for k, fit in enumerate(fits):
                 row = rows[fit.pid].get(fid)

@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any, Callable, Sequence, TypeVar
 
 import torch
-from tqdm import tqdm
 
 from glimpse.gaussians.phases import PhaseTimer
 from glimpse.gaussians.training import view_for_step
 from glimpse.io.checkpoint import load_checkpoint, save_checkpoint
+from glimpse.io.progress import Progress
 
 View = TypeVar("View")
 
@@ -109,14 +109,13 @@ class GaussianTrainer(ABC):
             self.step = self.log.resumed_from = int(state["step"])
             log.info("resuming %s from iteration %d (%s)", self.name, self.step, self.checkpoint)
         started = time.perf_counter()
-        bar = tqdm(total=total, initial=self.step, desc=self.name, unit="it", disable=None, leave=False)
+        bar = Progress(total, self.name, "iteration", initial=self.step)
         while self.step < total:
             with self.phases.iteration():
                 values = self._iteration()
             if self.step % LOSS_HISTORY_EVERY == 0 or self.step == total:
                 self.log.losses.append(self._history_entry(values))
-            bar.update(1)
-            bar.set_postfix(**self._progress(values), refresh=False)
+            bar.update(1, postfix=self._progress(values))
             if self.step % self.checkpoint_every == 0 and self.step < total:
                 save_checkpoint(self.checkpoint, self.key, {
                     "step": self.step, "losses": self.log.losses, "densify_events": self.log.densify_events,

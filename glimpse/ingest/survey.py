@@ -15,11 +15,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from glimpse.cameras.motion import MotionMeasure, measure_motion, sample_ids
 from glimpse.errors import GlimpseError
 from glimpse.ingest.config import IngestConfig
+from glimpse.io.progress import progress
 from glimpse.io.video import VideoInfo, container_tags, iter_video, probe_video
 
 TIME_TOLERANCE_S = 1e-3  # a frame shown within a millisecond of a grid time counts as on it
@@ -107,7 +107,7 @@ def survey_video(path: Path, config: IngestConfig) -> Survey:
     times: list[float] = []
     samples: list[np.ndarray] = []
     limited = False
-    for index, seconds, rgb in tqdm(iter_video(path, track_size), desc="surveying video", unit="frame", leave=False,
+    for index, seconds, rgb in progress(iter_video(path, track_size), desc="surveying video", unit="frame", leave=False,
                                     total=info.frame_count or None):
         if times and seconds <= times[-1]:  # a decoder without timestamps: fall back to the nominal rate
             seconds = times[-1] + 1.0 / fps

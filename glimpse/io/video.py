@@ -14,9 +14,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from glimpse.errors import GlimpseError
+from glimpse.io.progress import progress
 
 VIDEO_CODEC = "libx264"
 VIDEO_QUALITY = 8  # imageio-ffmpeg's 0-10 scale (10 = best); 8 keeps keypoint dots and edges crisp
@@ -139,7 +139,7 @@ def iter_video_frames(path: str | Path, wanted: Collection[int], desc: str) -> I
     """(decode index, [H, W, 3] uint8 RGB) of the ``wanted`` decode indices of ``path``, in order, with a progress
     bar; decoding stops after the last one. Raises GlimpseError when the video ends before it."""
     last, decoded = max(wanted), 0
-    for index, _seconds, rgb in tqdm(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
+    for index, _seconds, rgb in progress(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
         decoded = index + 1
         if index in wanted:
             yield index, rgb

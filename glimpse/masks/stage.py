@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
@@ -26,6 +25,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
+from glimpse.io.progress import progress
 from glimpse.masks.assign import (
     FrameMasks,
     body_frame_masks,
@@ -73,7 +73,7 @@ def static_scene(inputs: MasksInputs, config: MasksConfig, paths: dict[int, Path
         return None, "off (03_masks.static_occluders)"
     if inputs.camera_motion != "static":
         return None, "not available: the camera moves"
-    std = temporal_std(read_rgb(paths[f]) for f in tqdm(sorted(inputs.cameras), desc="03_masks static scene",
+    std = temporal_std(read_rgb(paths[f]) for f in progress(sorted(inputs.cameras), desc="03_masks static scene",
                                                           unit="frame", leave=False))
     return std < config.static_max_std, f"temporal colour std < {config.static_max_std} over {len(inputs.cameras)} frames"
 
@@ -186,7 +186,7 @@ def static_pass(frames: _Frames, config: MasksConfig, paths: dict[int, Path], mo
     picks = np.unique(np.linspace(0, len(ids) - 1, min(config.plate_frames, len(ids))).round().astype(int))
     plate_ids = {ids[k] for k in picks} if plate_wanted else set()
     images, covered = [], []
-    for fid in tqdm(ids, desc="03_masks static pass", unit="frame", leave=False):
+    for fid in progress(ids, desc="03_masks static pass", unit="frame", leave=False):
         present, layers, scales, _ = frames.layers(fid)
         if motion is not None:
             for k, pid in enumerate(present):
@@ -222,7 +222,7 @@ def compute_masks(inputs: MasksInputs, config: MasksConfig, out: Path) -> dict:
     frames_doc: dict[str, dict] = {}
     overlaps: dict[str, list[float]] = {pid: [] for pid in pids}
     can_score = mode != "provided" and all(person.masks for person in scene.humans.values())
-    for fid in tqdm(sorted(inputs.cameras), desc="03_masks", unit="frame"):
+    for fid in progress(sorted(inputs.cameras), desc="03_masks", unit="frame"):
         camera = inputs.cameras[fid]
         present, layers, scales, joints = frames.layers(fid)
         erode = _pixels(config.static_erode_m, camera, layers, scales)

@@ -27,12 +27,13 @@ from typing import Any, Callable, Iterator
 
 from glimpse import __version__
 from glimpse.config import config_from_mapping, tracking_reads
-from glimpse.errors import GlimpseError
+from glimpse.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, GlimpseError
 from glimpse.locks import process_alive
 from glimpse.pipeline.prepare import PARAMS_FORMAT, RunPaths, canonical_json, locate_run, prepare_run, run_lock
 from glimpse.pipeline.stages import STAGE_NAMES, StageSpec, stage_spec
 
 MANIFEST_FORMAT = "glimpse-manifest/1"
+LOG_FILE = "log.txt"  # beside the manifest; a failed stage's is kept as OUT/<scene>/<stage>.failed.log.txt
 log = logging.getLogger("glimpse")
 
 
@@ -187,15 +188,53 @@ def _run_locked(stage: str, scene_root: Path, out_root: Path, cli_params: str, b
     )
     started = time.time()
     try:
-        body(ctx)
-        _check_reads(spec, ctx.reads)
-        manifest = _manifest(ctx, started, list(spec.upstream))
+        with stage_log(tmp / LOG_FILE):
+            log.info("%s on %s (glimpse %s), into %s", stage, scene_root, code_version(), run.stage_dir(stage))
+            body(ctx)
+            _check_reads(spec, ctx.reads)
+            ctx.formats[LOG_FILE] = "text: what the stage did, its warnings and timings"
+            manifest = _manifest(ctx, started, list(spec.upstream))
+            if ctx.summary:
+                log.info("summary: %s", json.dumps(ctx.summary, sort_keys=True, default=str))
+            log.info("finished in %.1f s (%s)", manifest["timings_s"]["total"],
+                     ", ".join(f"{k} {v:.1f} s" for k, v in manifest["timings_s"].items() if k != "total"))
         (tmp / "manifest.json").write_text(canonical_json(manifest))
         publish(tmp, run.stage_dir(stage))
+        (run.root / f"{stage}.failed.{LOG_FILE}").unlink(missing_ok=True)
+    except BaseException:
+        if (tmp / LOG_FILE).is_file():
+            shutil.copyfile(tmp / LOG_FILE, run.root / f"{stage}.failed.{LOG_FILE}")
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     shutil.rmtree(ctx.work, ignore_errors=True)
     return run.stage_dir(stage)
+
+
+@contextmanager
+def stage_log(path: Path) -> Iterator[None]:
+    """While the stage runs, everything Glimpse logs at INFO and above and every Python warning also goes to
+    ``path`` (published as the stage's log.txt), each line with its time."""
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%Y-%m-%d %H:%M:%S"))
+    handler.setLevel(logging.INFO)
+    package, root = logging.getLogger("glimpse"), logging.getLogger()
+    saved_level = package.level
+    if package.getEffectiveLevel() > logging.INFO:
+        package.setLevel(logging.INFO)
+    logging.captureWarnings(True)
+    root.addHandler(handler)
+    try:
+        yield
+    except BaseException as exc:
+        logging.getLogger(__name__).error("stopped: %s", exc or type(exc).__name__,
+                                          exc_info=not isinstance(exc, (GlimpseError, KeyboardInterrupt)))
+        raise
+    finally:
+        root.removeHandler(handler)
+        handler.close()
+        logging.captureWarnings(False)
+        package.setLevel(saved_level)
 
 
 def temp_name(prefix: str) -> str:
@@ -219,7 +258,8 @@ def remove_orphans(folder: Path, prefix: str) -> None:
 def stage_main(stage: str, body: Callable[[StageContext], None], description: str) -> None:
     """Command-line entry point of ``stages/<stage>/run.py``.
 
-    Bad input exits with status 2 and one message; bugs keep their traceback.
+    Bad input exits with status EXIT_BAD_INPUT and one message, Ctrl-C with EXIT_INTERRUPTED (glimpse.errors;
+    what is finished and checkpointed is kept); bugs keep their traceback.
     """
     parser = argparse.ArgumentParser(prog=f"stages/{stage}/run.py", description=description)
     parser.add_argument("--scene", required=True, type=Path, help="scene folder (glimpse-scene/1)")
@@ -234,7 +274,10 @@ def stage_main(stage: str, body: Callable[[StageContext], None], description: st
         final = run_stage(stage, args.scene, args.out, args.params, body)
     except GlimpseError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        sys.exit(EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        print(f"{stage}: interrupted; run it again to resume from its last checkpoint", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
     log.info("done: %s", final)
 
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from glimpse.body.motion import BodySequence
 from glimpse.errors import GlimpseError
 from glimpse.io.images import write_png
+from glimpse.io.progress import progress
 from glimpse.io.video import write_mp4
 from glimpse.replay.finished import load_finished_run
 from glimpse.replay.motion import motion_from_spec, retarget
@@ -51,7 +51,7 @@ def render_command(run_dir: Path, camera: str, time: str, remove: str, backgroun
     driven = {pid: retarget(motion, people[pid].body, times[0], run.body_model, np.arange(len(frames)))
               for pid, motion in motions.items()}
     edits = Edits(frozenset(pid for pid in remove.split(",") if pid), background, driven)
-    images = tqdm(render_video(run, frames, edits, CPU), total=len(frames), desc="render", unit="frame")
+    images = progress(render_video(run, frames, edits, CPU), total=len(frames), desc="render", unit="frame")
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix == ".mp4":
         write_mp4(out, images, fps)

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name, read_rgb, write_png
+from glimpse.io.progress import progress
 from glimpse.io.video import iter_video_frames
 from glimpse.scene import Scene
 
@@ -41,7 +41,7 @@ def write_frames(scene: Scene, frame_ids: list[int], undistorter: Undistorter, o
             write_png(path, undistorter.image(rgb))
             written[index] = path
         return written
-    for fid in tqdm(frame_ids, desc="frames", unit="frame", leave=False):
+    for fid in progress(frame_ids, desc="frames", unit="frame", leave=False):
         src = scene.frame_paths[fid]
         if undistorter.active:
             path = out_dir / f"{frame_name(fid)}.png"

@@ -15,7 +15,6 @@ import json
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
@@ -26,6 +25,7 @@ from glimpse.compute import apply_compute  # noqa: E402
 from glimpse.fit.stage import GROUND_FORMAT, Fitter  # noqa: E402
 from glimpse.fit.video import write_overlay_video  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.io.progress import progress  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
@@ -46,7 +46,7 @@ def run(ctx: StageContext) -> None:
     fitter = Fitter(scene, model, cameras, config, units)
     people = [person for _, person in sorted(scene.humans.items())]
     with ctx.timed("fit"):
-        fits, floor = fitter.fit_people(people, progress=lambda items: tqdm(items, desc="02_smpl_fit people",
+        fits, floor = fitter.fit_people(people, progress=lambda items: progress(items, desc="02_smpl_fit people",
                                                                             unit="person"))
     for fit in fits:
         folder = ctx.out / "humans" / fit.pid
