@@ -15,6 +15,7 @@ PYTHON ?= python3
 CONSTRAINTS ?= constraints.txt
 STAGES_DIR ?= stages
 # Worker processes of `make test` (pytest-xdist; each test file stays in one worker, which keeps module fixtures shared).
+# With more than one, OpenMP's threads do not spin (the workers share the cores: docs/speed.md).
 TEST_WORKERS ?= 2
 
 # Another defaults file instead of pipeline.yaml (a full copy with your changes).
@@ -120,7 +121,7 @@ print-dag: venv
 
 test: $(VENV)/.installed-test $(MODELS_DIR)/.installed
 	$(VENV)/bin/lint-imports --no-cache
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	GOMP_SPINCOUNT=$(if $(filter 1,$(TEST_WORKERS)),$(GOMP_SPINCOUNT),0) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 bench: venv
 	$(PY) bench/run_all.py

@@ -48,9 +48,11 @@ EXAMPLES = {
     "prepare": "glimpse prepare --scene runs/scenes/demo_small --whole-pipeline",
     "params": "glimpse params --scene runs/scenes/demo_small --stage 04_bg_pretrain",
     "run-dir": "glimpse run-dir --scene runs/scenes/demo_small   # -> runs/demo_small",
-    "export": "glimpse export runs/demo_small --frame 12 --sh-degree 3",
+    "export": "glimpse export runs/demo_small --frames 12 --sh-degree 3\n"
+              "  glimpse export runs/demo_small --frames 0:23 --up z --out walk_sequence   # a PLY per frame, z up",
     "render": "glimpse render runs/demo_small --camera orbit:30 --time 12 --remove p1 --out orbit.mp4\n"
-              "  glimpse render runs/demo_small --motion p0=builtin:walk --out walk.mp4",
+              "  glimpse render runs/demo_small --motion p0=builtin:walk --out walk.mp4\n"
+              "  glimpse render runs/demo_small --time 0:23 --passes rgb,alpha,depth,mask --out frames  # + frames_exr/",
 }
 
 
@@ -120,7 +122,11 @@ def main(argv: list[str] | None = None) -> int:
                            help="also refuse a scene the pipeline cannot run to the end (make all)")
     p_export = command("export", "a finished run's Gaussians and cameras for other tools")
     p_export.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
-    p_export.add_argument("--frame", type=int, default=None, help="input frame id (default: the middle one)")
+    p_export.add_argument("--frames", "--frame", default=None, help="T | A:B | all: input frame ids, one scene PLY "
+                                                                    "each (default: the middle input frame)")
+    p_export.add_argument("--up", choices=("y", "z", "keep"), default="y",
+                          help="turn the world so the input cameras' mean up is +y (default; splat viewers, "
+                               "glTF) or +z (Blender, z-up tools), or keep the run's frame")
     p_export.add_argument("--out", type=Path, default=None, help="default: RUN/export")
     p_export.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
                           help="SH degree of the posed PLYs (default: as trained; 3 for INRIA's SIBR viewer)")
@@ -140,6 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     p_render.add_argument("--fps", type=float, default=25.0, help="frames per second of the video")
     p_render.add_argument("--out", type=Path, default=None, help="an .mp4, or a folder for PNG frames "
                                                                  "(default: RUN/renders/render.mp4)")
+    p_render.add_argument("--passes", default="rgb", help="rgb,alpha,depth,mask: beyond rgb, one OpenEXR file per "
+                                                          "frame of them all (linear colour, alpha, depth in the "
+                                                          "world's units, each person's visible mask) in "
+                                                          "<out name>_exr/ beside the video or PNGs")
     args = parser.parse_args(argv)
     try:
         return _dispatch(args)
@@ -191,18 +201,20 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "export":
         from glimpse.export.run import export_run
         from glimpse.replay.finished import default_frame, load_finished_run
+        from glimpse.replay.request import parse_times
 
         run = load_finished_run(args.run)
-        frame = default_frame(run) if args.frame is None else args.frame
-        out = export_run(run, frame, args.out or args.run / "export", args.sh_degree)
-        print(f"exported frame {frame} of {args.run} to {out}/ (docs/exports.md says which viewers open what)")
+        frames = [default_frame(run)] if args.frames is None else parse_times(args.frames, run, "--frames")
+        out = export_run(run, frames, args.out or args.run / "export", args.sh_degree, args.up)
+        print(f"exported {len(frames)} frame(s) ({frames[0]}..{frames[-1]}) of {args.run} to {out}/, up {args.up} "
+              f"(docs/exports.md says which viewers open what)")
         return 0
     if args.command == "render":
         from glimpse.replay.video import render_command
 
         out = render_command(args.run, args.camera, args.time, args.remove, not args.no_background, args.scene,
                              args.orbit_frames, args.fps, args.out or args.run / "renders" / "render.mp4",
-                             args.motion, args.motion_seconds)
+                             args.motion, args.motion_seconds, args.passes)
         print(f"rendered {out}")
         return 0
     if args.command == "run-dir":

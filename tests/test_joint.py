@@ -256,19 +256,20 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
 
     from glimpse.cli import main as cli
     from glimpse.humans.compose import frame_gaussians, render_frame
-    from glimpse.render import rasterize
+    from glimpse.render import Camera, rasterize
+    from glimpse.replay.cameras import mean_up
     from glimpse.replay.finished import load_finished_run
 
     _, run_dir = tiny
-    assert cli(["export", str(run_dir), "--frame", "3", "--out", str(tmp_path / "export")]) == 0
+    assert cli(["export", str(run_dir), "--frame", "3", "--up", "keep", "--out", str(tmp_path / "export")]) == 0
     doc = read_json(tmp_path / "export" / "export.json")
-    assert doc["frame"] == 3 and set(doc["people"]) == {"p0", "p1"}
+    assert doc["frames"] == [3] and doc["scenes"] == ["scene_000003.ply"] and set(doc["people"]) == {"p0", "p1"}
     finished = load_finished_run(run_dir)
     camera = render_camera(finished.cameras[3], torch.device("cpu"))
     with torch.no_grad():
         gaussians = frame_gaussians(camera, 3, finished.people, RENDER.sh_degree, finished.background, RENDER.sh_degree)
         expected = render_frame(camera, gaussians, len(finished.people), RENDER).rgb
-        scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "export" / doc["scene"])[0])
+        scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "export" / doc["scenes"][0])[0])
         exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
     assert len(scene) == len(gaussians.means) and (exported - expected).abs().max() < 1e-4
     for pid in ("p0", "p1"):
@@ -280,6 +281,24 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
     image = next(i for i in model.images.values() if i.name == "000003.png")
     assert np.allclose(image.cam_from_world().rotation.matrix(), finished.cameras[3].R, atol=1e-6)
     assert model.cameras[image.camera_id].width == finished.width
+
+    # a sequence, turned y-up (the default): the scene and its COLMAP cameras turn together, so the exported
+    # camera sees the exported frame as the run's camera saw the run (positions, orientations, SH colours)
+    assert cli(["export", str(run_dir), "--frames", "2:3", "--out", str(tmp_path / "sequence")]) == 0
+    doc = read_json(tmp_path / "sequence" / "export.json")
+    turn = np.array(doc["world_rotation"])
+    assert doc["up"] == "y" and doc["scenes"] == ["scene_000002.ply", "scene_000003.ply"]
+    assert np.allclose(turn @ mean_up(list(finished.cameras.values())), [0.0, 1.0, 0.0], atol=1e-9)
+    model = pycolmap.Reconstruction(str(tmp_path / "sequence" / "cameras"))
+    image = next(i for i in model.images.values() if i.name == "000003.png")
+    pose = image.cam_from_world()
+    assert np.allclose(pose.rotation.matrix(), finished.cameras[3].R @ turn.T, atol=1e-6)
+    turned_camera = Camera(camera.K, torch.as_tensor(pose.rotation.matrix(), dtype=torch.float32),
+                           torch.as_tensor(pose.translation, dtype=torch.float32), camera.width, camera.height)
+    with torch.no_grad():
+        scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "sequence" / "scene_000003.ply")[0])
+        exported = rasterize(turned_camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
+    assert (exported - expected).abs().max() < 1e-3
     assert cli(["export", str(tmp_path / "nothing")]) == EXIT_BAD_INPUT
     assert "no finished stage 06" in capsys.readouterr().err
 
@@ -296,7 +315,7 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
     assert cli(["render", str(run_dir), "--camera", "heldout:cam00", "--scene", str(scene), "--time", "2",
                 "--out", str(tmp_path / "held")]) == 0  # orbits: stage 07's videos and tests/test_replay.py
     assert len(list((tmp_path / "held").glob("*.png"))) == 1
-    assert cli(["render", str(run_dir), "--remove", "p9"]) == 2 and "the run's people are p0, p1" in capsys.readouterr().err
+    assert cli(["render", str(run_dir), "--remove", "p9"]) == EXIT_BAD_INPUT and "the run's people are p0, p1" in capsys.readouterr().err
     assert cli(["render", str(run_dir), "--time", "1", "--motion", "p0=builtin:walk", "--motion-seconds", "0.3",
                 "--fps", "10", "--out", str(tmp_path / "walk")]) == 0  # a frozen scene, p0 walks 3 frames
     walked = [np.asarray(Image.open(f)).astype(int) for f in sorted((tmp_path / "walk").glob("*.png"))]
@@ -312,6 +331,32 @@ def test_a_finished_run_renders_from_any_camera_with_people_removed(tiny, tmp_pa
     changed = np.abs(full - without_p1).max(-1) > 10
     assert changed[p1_alone & ~p0_alone].mean() > 0.5  # where p1 was, the background (or p0) shows now
     assert not changed[~p1_alone].any()  # nothing else moves
+
+
+def test_render_passes_are_exr_beside_the_pngs_with_linear_colour_alpha_depth_and_visible_masks(tiny, tmp_path):
+    from glimpse.cli import main as cli
+    from glimpse.io.exr import read_exr, srgb_to_linear
+    from glimpse.replay.finished import load_finished_run
+    from glimpse.replay.render import pelvis
+
+    scene, run_dir = tiny
+    assert cli(["render", str(run_dir), "--time", "3", "--passes", "rgb,depth,alpha,mask",
+                "--out", str(tmp_path / "frames")]) == 0
+    channels, header = read_exr(tmp_path / "frames_exr" / "000000.exr")
+    assert sorted(channels) == ["A", "B", "G", "R", "Z", "mask.p0", "mask.p1"]
+    assert header["glimpse_depth_units"] == "metres"
+    png = np.asarray(Image.open(tmp_path / "frames" / "000000.png")) / 255.0
+    linear = np.stack([channels[c] for c in "RGB"], axis=-1)
+    assert np.abs(linear - srgb_to_linear(png)).max() < 0.01  # the PNG's colours, linear, to 8-bit rounding
+    alpha, masks = channels["A"], channels["mask.p0"] + channels["mask.p1"]
+    assert alpha.min() >= 0.0 and alpha.max() <= 1.0 + 1e-5 and (masks <= alpha + 1e-5).all()
+    finished = load_finished_run(run_dir)
+    camera = finished.cameras[3]
+    for person in finished.people:
+        centre_z = (camera.R @ pelvis(person, 3) + camera.t)[2]
+        own = channels[f"mask.{person.pid}"] > 0.9
+        assert own.sum() > 5 and abs(np.median(channels["Z"][own]) - centre_z) < 0.3  # metres: the body's depth
+    assert cli(["render", str(run_dir), "--passes", "rgb,normals"]) == EXIT_BAD_INPUT
 
 
 def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):

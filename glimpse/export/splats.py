@@ -112,3 +112,29 @@ def frame_splats(background: GaussianModel | None, people: Sequence[PersonGaussi
     if not parts:
         raise ValueError(f"frame {frame_id}: no background and nobody present, nothing to export")
     return concatenate(parts)
+
+
+def rotation_between(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """[3, 3] the smallest rotation taking unit vector ``source`` to unit vector ``target`` (a half turn about an
+    axis perpendicular to both when they are opposite)."""
+    source, target = source / np.linalg.norm(source), target / np.linalg.norm(target)
+    axis = np.cross(source, target)
+    if np.linalg.norm(axis) < 1e-9:
+        if np.dot(source, target) > 0:
+            return np.eye(3)
+        helper = np.eye(3)[np.argmin(np.abs(source))]
+        axis = np.cross(source, helper)
+        return Rotation.from_rotvec(math.pi * axis / np.linalg.norm(axis)).as_matrix()
+    angle = math.atan2(np.linalg.norm(axis), np.dot(source, target))
+    return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix()
+
+
+@torch.no_grad()
+def rotated_splats(splats: GaussianSplats, rotation: np.ndarray) -> GaussianSplats:
+    """The same Gaussians in a world turned by ``rotation`` [3, 3] (new point = rotation @ old point): means,
+    orientations and SH (colours from every direction unchanged), scales and opacities as they are."""
+    quats = Rotation.from_matrix(rotation) * Rotation.from_quat(splats.quats[:, [1, 2, 3, 0]])
+    xyzw = quats.as_quat()
+    sh = rotate_sh(torch.as_tensor(splats.sh), torch.as_tensor(rotation)[None])
+    return GaussianSplats(splats.means @ rotation.T.astype(np.float32), sh.numpy(), splats.opacity_logits,
+                          splats.log_scales, np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1))

@@ -14,7 +14,6 @@ from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.humans.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
-from glimpse.io.images import rgb_to_uint8
 from glimpse.replay.finished import FinishedRun
 
 
@@ -88,11 +87,24 @@ def _joined(first: FrameGaussians, second: FrameGaussians, first_people: int) ->
                           torch.cat([first.groups, groups]), rows)
 
 
+@dataclass(frozen=True)
+class ShotPasses:
+    """One render's passes. rgb [H, W, 3] in [0, 1] (sRGB-encoded, as the input frames; black where nothing is
+    drawn); alpha [H, W]; depth [H, W]: the expected camera z of what is drawn, in the world's units, 0 where
+    nothing is; masks: pid -> [H, W] that person's share of the alpha (what of them is visible: people and
+    background in front are accounted for; the shares sum to the alpha)."""
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    depth: np.ndarray
+    masks: dict[str, np.ndarray]
+
+
 @torch.no_grad()
-def render_shot(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edits, device: torch.device,
-                video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
-    """[H, W, 3] uint8: the scene at ``frame_id`` from ``shot`` (black where nothing is drawn), the ``driven``
-    people (driven_people) at their motion's ``video_index``."""
+def render_shot_passes(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edits, device: torch.device,
+                       video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> ShotPasses:
+    """The scene at ``frame_id`` from ``shot``, the ``driven`` people (driven_people) at their motion's
+    ``video_index``: every pass of the render."""
     camera = render_camera(shot, device)
     people = [p for p in run.people if p.pid not in edits.removed and p.pid not in edits.driven]
     background = run.background if edits.background else None
@@ -100,14 +112,34 @@ def render_shot(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edi
     gaussians = frame_gaussians(camera, frame_id, people, degree, background, degree)
     if driven:
         gaussians = _joined(gaussians, frame_gaussians(camera, video_index, driven, degree), len(people))
-    rgb = render_frame(camera, gaussians, len(people) + len(driven), run.render, torch.zeros(3, device=device)).rgb
-    return rgb_to_uint8(rgb)
+    out = render_frame(camera, gaussians, len(people) + len(driven), run.render, torch.zeros(3, device=device))
+    pids = [p.pid for p in people] + [p.pid for p in driven]
+    masks = {pid: out.group_alpha[1 + k].cpu().numpy() for k, pid in enumerate(pids)} if pids else {}
+    return ShotPasses(out.rgb.clamp(0.0, 1.0).cpu().numpy(), out.alpha.cpu().numpy(), out.depth.cpu().numpy(), masks)
+
+
+def colour_uint8(passes: ShotPasses) -> np.ndarray:
+    """[H, W, 3] uint8 of the colour pass, rounded."""
+    return (passes.rgb * 255.0 + 0.5).astype(np.uint8)
+
+
+def render_shot(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edits, device: torch.device,
+                video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
+    """[H, W, 3] uint8: the colour pass of render_shot_passes."""
+    return colour_uint8(render_shot_passes(run, shot, frame_id, edits, device, video_index, driven))
+
+
+def render_video_passes(run: FinishedRun, frames: Sequence[tuple[PinholeCamera, int]], edits: Edits,
+                        device: torch.device) -> Iterator[ShotPasses]:
+    """Every pass of a video's frames, one render per (shot, frame id); driven people follow the video's index."""
+    edits.check(run)
+    driven = driven_people(run, edits)
+    for index, (shot, frame_id) in enumerate(frames):
+        yield render_shot_passes(run, shot, frame_id, edits, device, index, driven)
 
 
 def render_video(run: FinishedRun, frames: Sequence[tuple[PinholeCamera, int]], edits: Edits, device: torch.device
                  ) -> Iterator[np.ndarray]:
-    """The frames of a video, one render per (shot, frame id); driven people follow the video's index."""
-    edits.check(run)
-    driven = driven_people(run, edits)
-    for index, (shot, frame_id) in enumerate(frames):
-        yield render_shot(run, shot, frame_id, edits, device, index, driven)
+    """The frames of a video as [H, W, 3] uint8 (render_video_passes' colour)."""
+    for passes in render_video_passes(run, frames, edits, device):
+        yield colour_uint8(passes)

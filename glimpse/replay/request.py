@@ -19,8 +19,8 @@ from glimpse.replay.render import people_centre
 CAMERA_KINDS = ("input", "orbit", "heldout", "json", "colmap")
 
 
-def parse_times(spec: str, run: FinishedRun) -> list[int]:
-    """Input frame ids (with a camera) named by ``spec``."""
+def parse_times(spec: str, run: FinishedRun, option: str = "--time") -> list[int]:
+    """Input frame ids (with a camera) named by ``spec`` (the command-line ``option`` that gave it)."""
     frames = sorted(run.cameras)
     if spec == "all":
         return frames
@@ -31,9 +31,9 @@ def parse_times(spec: str, run: FinishedRun) -> list[int]:
         else:
             chosen = [int(spec)] if int(spec) in run.cameras else []
     except ValueError:
-        raise GlimpseError(f"--time {spec!r}: give a frame id T, a range A:B, or all") from None
+        raise GlimpseError(f"{option} {spec!r}: give a frame id T, a range A:B, or all") from None
     if not chosen:
-        raise GlimpseError(f"--time {spec}: no input frame with a camera there (frames {frames[0]}..{frames[-1]})")
+        raise GlimpseError(f"{option} {spec}: no input frame with a camera there (frames {frames[0]}..{frames[-1]})")
     return chosen
 
 
