@@ -72,7 +72,7 @@ $(VENV)/.installed: requirements.txt requirements-nodeps.txt $(CONSTRAINTS)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet -c $(CONSTRAINTS) torch -r requirements.txt
 	$(PY) -m pip install --quiet --no-deps -r requirements-nodeps.txt
-	$(PY) -m pip install --quiet --no-deps --no-build-isolation --editable .
+	$(PY) -m pip install --quiet --no-deps --editable .
 	$(PY) -m glimpse.render.composite_cpu
 	touch $@
 

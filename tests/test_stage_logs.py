@@ -66,3 +66,15 @@ def test_progress_off_a_terminal_is_quiet_between_lines(monkeypatch, caplog):
     with caplog.at_level(logging.INFO, logger="glimpse.progress"):
         assert sum(progress(range(1000), desc="frames", unit="frame")) == 499500
     assert [r.getMessage().split(" (")[0] for r in caplog.records] == ["frames: 1000/1000 frames"]
+
+
+def test_a_bug_leaves_its_traceback_in_the_failed_log(tmp_path):
+    write_tiny_scene(tmp_path / "scene")
+
+    def breaks(ctx):
+        raise RuntimeError("index out of range in the fit")
+
+    with pytest.raises(RuntimeError):
+        run_stage("01_sfm", tmp_path / "scene", tmp_path / "runs", "", breaks)
+    text = (tmp_path / "runs" / "tiny" / f"01_sfm.failed.{LOG_FILE}").read_text()
+    assert "stopped: index out of range in the fit" in text and "Traceback" in text and "in breaks" in text

@@ -29,7 +29,7 @@ from glimpse.io.progress import progress
 from glimpse.replay.cameras import mean_up
 from glimpse.replay.finished import FinishedRun
 
-EXPORT_FORMAT = "glimpse-export/1"
+EXPORT_FORMAT = "glimpse-export/2"  # 2: lists of frames and scenes, up and world_rotation
 PERSON_FILES = ("canonical.ply", "body.npz", "skinning.npz")
 
 

@@ -226,9 +226,10 @@ def stage_log(path: Path) -> Iterator[None]:
     root.addHandler(handler)
     try:
         yield
-    except BaseException as exc:
-        logging.getLogger(__name__).error("stopped: %s", exc or type(exc).__name__,
-                                          exc_info=not isinstance(exc, (GlimpseError, KeyboardInterrupt)))
+    except BaseException as exc:  # into the file only: the console gets the stage's own one-line error
+        traceback = sys.exc_info() if not isinstance(exc, (GlimpseError, KeyboardInterrupt)) else None
+        handler.handle(logging.getLogger(__name__).makeRecord(
+            __name__, logging.ERROR, __file__, 0, "stopped: %s", (exc or type(exc).__name__,), traceback))
         raise
     finally:
         root.removeHandler(handler)

@@ -92,7 +92,7 @@ class ShotPasses:
     """One render's passes. rgb [H, W, 3] in [0, 1] (sRGB-encoded, as the input frames; black where nothing is
     drawn); alpha [H, W]; depth [H, W]: the expected camera z of what is drawn, in the world's units, 0 where
     nothing is; masks: pid -> [H, W] that person's share of the alpha (what of them is visible: people and
-    background in front are accounted for; the shares sum to the alpha)."""
+    background in front are accounted for; with the background's share, the shares sum to the alpha)."""
 
     rgb: np.ndarray
     alpha: np.ndarray
