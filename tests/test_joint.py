@@ -253,6 +253,7 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
 
 def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_path, capsys):
     import pycolmap
+    import trimesh
 
     from glimpse.cli import main as cli
     from glimpse.humans.compose import frame_gaussians, render_frame
@@ -273,9 +274,19 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
         exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
     assert len(scene) == len(gaussians.means) and (exported - expected).abs().max() < 1e-4
     for pid in ("p0", "p1"):
-        assert "posed_000003.ply" in doc["people"][pid]["files"]
+        assert "posed_000003.ply" in doc["people"][pid]["files"] and "mesh_000003.glb" in doc["people"][pid]["files"]
         canonical, _ = read_gaussians_ply(tmp_path / "export" / "people" / pid / "canonical.ply")
         assert len(canonical) == doc["people"][pid]["gaussians"]
+        # the body mesh, read by trimesh: the exported body.npz posed by the body model at frame 3, coloured
+        mesh = trimesh.load(tmp_path / "export" / "people" / pid / "mesh_000003.glb", force="mesh", process=False)
+        body = read_body_params(tmp_path / "export" / "people" / pid / "body.npz")
+        row = list(body.frame_ids).index(3)
+        posed = finished.body_model(body.betas[None], body.global_orient[row:row + 1], body.body_pose[row:row + 1],
+                                    body.transl[row:row + 1], [body.scale]).vertices[0].numpy()
+        assert np.abs(np.asarray(mesh.vertices) - posed).max() < 1e-5
+        assert len(mesh.faces) == len(finished.body_model.faces)
+        colours = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(float)
+        assert colours.std(axis=0).min() > 5  # coloured by the Gaussians, not one flat colour
     model = pycolmap.Reconstruction(str(tmp_path / "export" / "cameras"))  # COLMAP's own reader
     assert len(model.images) == len(finished.cameras)
     image = next(i for i in model.images.values() if i.name == "000003.png")
@@ -299,6 +310,9 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
         scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "sequence" / "scene_000003.ply")[0])
         exported = rasterize(turned_camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
     assert (exported - expected).abs().max() < 1e-3
+    kept = trimesh.load(tmp_path / "export" / "people" / "p0" / "mesh_000003.glb", force="mesh", process=False)
+    turned = trimesh.load(tmp_path / "sequence" / "people" / "p0" / "mesh_000003.glb", force="mesh", process=False)
+    assert np.abs(np.asarray(turned.vertices) - np.asarray(kept.vertices) @ turn.T).max() < 1e-5
     assert cli(["export", str(tmp_path / "nothing")]) == EXIT_BAD_INPUT
     assert "no finished stage 06" in capsys.readouterr().err
 

@@ -5,6 +5,7 @@
                                       one per exported frame, a sequence a splat viewer can play
       people/<pid>/canonical.ply      the person in canonical (Da-pose) space, SH in the canonical frame
       people/<pid>/posed_<frame>.ply  the person alone at that frame (standard 3DGS)
+      people/<pid>/mesh_<frame>.glb   the fitted body at that frame, coloured by the Gaussians (binary glTF)
       people/<pid>/body.npz           refined body parameters of every frame (glimpse body parameters)
       people/<pid>/skinning.npz       skinning-weight grid (glimpse-skinning/1)
       cameras/                        the input cameras as a COLMAP text model
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.errors import GlimpseError
+from glimpse.export.meshes import person_vertex_colours, posed_vertices, write_mesh_glb
 from glimpse.export.splats import frame_splats, posed_person_splats, rotated_splats, rotation_between, with_sh_degree
 from glimpse.gaussians.ply import GaussianSplats, write_gaussians_ply
 from glimpse.io.colmap_text import write_colmap_text
@@ -68,6 +70,8 @@ def export_run(run: FinishedRun, frame_ids: list[int], out: Path, sh_degree: int
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / "people").mkdir(parents=True)
     scenes, people_doc = [], {}
+    faces = run.body_model.faces.cpu().numpy()
+    colours = {person.pid: person_vertex_colours(person) for person in run.people}
     for person in run.people:
         (tmp / "people" / person.pid).mkdir()
         for file in PERSON_FILES:
@@ -82,7 +86,9 @@ def export_run(run: FinishedRun, frame_ids: list[int], out: Path, sh_degree: int
             if person.in_frame(frame_id):
                 write_gaussians_ply(tmp / "people" / person.pid / f"posed_{name}.ply",
                                     written(posed_person_splats(person, frame_id)), {"frame": name, "up": up})
-                people_doc[person.pid]["files"].append(f"posed_{name}.ply")
+                write_mesh_glb(tmp / "people" / person.pid / f"mesh_{name}.glb",
+                               posed_vertices(run.body_model, person, frame_id) @ turn.T, faces, colours[person.pid])
+                people_doc[person.pid]["files"] += [f"posed_{name}.ply", f"mesh_{name}.glb"]
     cameras = {fid: replace(camera, R=camera.R @ turn.T) for fid, camera in run.cameras.items()}
     write_colmap_text(tmp / "cameras", run.width, run.height, cameras, ".png")
     doc = {"format": EXPORT_FORMAT, "run": str(run.folder.resolve()), "frames": frame_ids, "scenes": scenes,
