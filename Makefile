@@ -68,18 +68,17 @@ help:
 	@echo "make test | make bench         tests | benchmarks"
 	@echo "options: OUT=dir (default runs/), PARAMS=\"section.key=value ...\", PIPELINE_YAML=file, WAIT=seconds"
 
-$(VENV)/.installed: requirements.txt requirements-nodeps.txt $(CONSTRAINTS)
+$(VENV)/.installed: pyproject.toml requirements-nodeps.txt $(CONSTRAINTS)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -c $(CONSTRAINTS) torch -r requirements.txt
+	$(PY) -m pip install --quiet -c $(CONSTRAINTS) --editable ".[sds]"
 	$(PY) -m pip install --quiet --no-deps -r requirements-nodeps.txt
-	$(PY) -m pip install --quiet --no-deps --editable .
 	$(PY) -m glimpse.render.composite_cpu
 	touch $@
 
 venv: $(VENV)/.installed
 
-$(VENV)/.installed-test: $(VENV)/.installed requirements-test.txt
-	$(PY) -m pip install --quiet -c $(CONSTRAINTS) -r requirements-test.txt
+$(VENV)/.installed-test: $(VENV)/.installed pyproject.toml $(CONSTRAINTS)
+	$(PY) -m pip install --quiet -c $(CONSTRAINTS) --editable ".[sds,test]"
 	touch $@
 
 $(MODELS_DIR)/.installed: tools/install_blazepose.py | $(VENV)/.installed
