@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -31,6 +32,8 @@ from glimpse.replay.cameras import mean_up, orbit_path
 from glimpse.replay.finished import FinishedRun
 from glimpse.replay.motion import motion_from_spec, retarget
 from glimpse.replay.render import Edits, people_centre, render_shot, render_video
+
+log = logging.getLogger(__name__)
 
 NEVER_SEEN_TINT = (255, 0, 255)  # magenta: the background no input frame showed, in removed_<pid>.mp4
 NEVER_SEEN_TINT_WEIGHT = 0.5
@@ -83,6 +86,11 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     """Write every video of the set under ``out``; returns file name -> what it shows. ``never_seen_dir``: stage
     04's never_seen/ masks (the removal video tints those pixels)."""
     written: dict[str, str] = {}
+
+    def wrote(name: str, what: str) -> None:
+        written[name] = what
+        log.info("07_eval: wrote renders/%s (%s)", name, what)
+
     times = sorted(run.cameras)[:: max(config.every, 1)]
     frozen = chosen_time(config, run)
     step_fps = fps / max(config.every, 1)
@@ -92,7 +100,7 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     if inputs:
         write_mp4(out / "input.mp4", (side_by_side(render_shot(run, run.cameras[t], t, Edits(), device), read_rgb(frames[t]))
                                       for t in inputs), step_fps)
-        written["input.mp4"] = "input view: render (left), input frame (right)"
+        wrote("input.mp4", "input view: render (left), input frame (right)")
     by_camera: dict[str, list[ScoredView]] = {}
     for view in heldout:
         by_camera.setdefault(view.name.split("/")[0], []).append(view)
@@ -100,22 +108,22 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
         write_mp4(out / f"heldout_{camera}.mp4", (side_by_side(
             render_shot(run, v.camera, v.frame_id, Edits(), device), read_rgb(v.image))
             for v in views), step_fps)
-        written[f"heldout_{camera}.mp4"] = f"held-out camera {camera}: render (left), ground truth (right)"
+        wrote(f"heldout_{camera}.mp4", f"held-out camera {camera}: render (left), ground truth (right)")
     if not run.people:
         return written
     axis, start = mean_up(list(run.cameras.values())), run.cameras[frozen]
     centre = people_centre(run.people, frozen)
     orbit = orbit_path(start, centre, axis, len(times))
     write_mp4(out / "orbit.mp4", render_video(run, list(zip(orbit, times)), Edits(), device), step_fps)
-    written["orbit.mp4"] = "one turn around the people while the video plays"
+    wrote("orbit.mp4", "one turn around the people while the video plays")
     freeze = orbit_path(start, centre, axis, config.orbit_frames)
     write_mp4(out / "freeze.mp4", render_video(run, [(s, frozen) for s in freeze], Edits(), device), fps)
-    written["freeze.mp4"] = f"time frozen at frame {frozen}, one turn around the people"
+    wrote("freeze.mp4", f"time frozen at frame {frozen}, one turn around the people")
     for person in run.people:
         write_mp4(out / f"person_{person.pid}.mp4", canonical_turntable(
             person, config.turntable_frames, config.turntable_size_px,
             config.turntable_radius_m, config.turntable_fovy_deg, run.render, device), fps)
-        written[f"person_{person.pid}.mp4"] = f"{person.pid} alone, canonical pose, one turn"
+        wrote(f"person_{person.pid}.mp4", f"{person.pid} alone, canonical pose, one turn")
     chosen = run.people[0].pid if config.person == "first" else config.person
     if chosen not in {p.pid for p in run.people}:
         raise GlimpseError(f"07_eval.renders.person: no person {chosen!r} in the run (people: "
@@ -124,13 +132,13 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     removed = (render_shot(run, run.cameras[t], t, edits, device) for t in times)
     write_mp4(out / f"removed_{chosen}.mp4", (side_by_side(image, with_never_seen(image, never_seen_dir, t))
                                               for image, t in zip(removed, times)), step_fps)
-    written[f"removed_{chosen}.mp4"] = (f"input view without {chosen} (left); the same with the background no input "
-                                        f"frame showed tinted magenta (right)")
+    wrote(f"removed_{chosen}.mp4", f"input view without {chosen} (left); the same with the background no input "
+                                   f"frame showed tinted magenta (right)")
     person = next(p for p in run.people if p.pid == chosen)
     if person.in_frame(frozen):
         motion = motion_from_spec(config.motion, fps, config.motion_seconds)
         driven = retarget(motion, person.body, frozen, run.body_model, np.arange(len(motion)))
         write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(run.cameras[frozen], frozen)] * len(motion),
                                                              Edits(driven={chosen: driven}), device), fps)
-        written[f"motion_{chosen}.mp4"] = f"{chosen} driven by {config.motion} from frame {frozen}, scene frozen"
+        wrote(f"motion_{chosen}.mp4", f"{chosen} driven by {config.motion} from frame {frozen}, scene frozen")
     return written

@@ -31,6 +31,7 @@ from glimpse.eval.views import ScoredView, ViewSet
 from glimpse.gaussians.model import GaussianModel
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
+from glimpse.io.progress import progress
 from glimpse.metrics.lpips import LPIPS
 from glimpse.metrics.table import (
     EvalProtocol,
@@ -79,7 +80,7 @@ def score_views(view_set: ViewSet, people: list[PersonGaussians], background: Ga
     composite: list[FrameMetrics] = []
     per_person: dict[str, list[FrameMetrics]] = {p.pid: [] for p in people}
     unseen_share: list[float] = []
-    for view in view_set.views:
+    for view in progress(view_set.views, desc="07_eval scoring", unit="view"):
         image, union, masks = view.read()
         target = torch.as_tensor(image, device=device).float() / 255.0
         union_t = torch.as_tensor(union, device=device)
