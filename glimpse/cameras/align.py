@@ -1,10 +1,14 @@
-"""Similarity alignment of camera trajectories (Umeyama 1991)."""
+"""Similarity alignment of camera trajectories (Umeyama 1991), and the rotation that aligns one direction with
+another."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import math
+
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from glimpse.cameras.model import PinholeCamera
 
@@ -72,3 +76,18 @@ def align_cameras(source: dict[int, PinholeCamera], target: dict[int, PinholeCam
         return np.concatenate([centres] + [centres + length * a for a in axes])
 
     return umeyama(augmented(source, src_c, reach / scale), augmented(target, dst_c, reach))
+
+
+def rotation_between(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """[3, 3] the smallest rotation taking unit vector ``source`` to unit vector ``target`` (a half turn about an
+    axis perpendicular to both when they are opposite)."""
+    source, target = source / np.linalg.norm(source), target / np.linalg.norm(target)
+    axis = np.cross(source, target)
+    if np.linalg.norm(axis) < 1e-9:
+        if np.dot(source, target) > 0:
+            return np.eye(3)
+        helper = np.eye(3)[np.argmin(np.abs(source))]
+        axis = np.cross(source, helper)
+        return Rotation.from_rotvec(math.pi * axis / np.linalg.norm(axis)).as_matrix()
+    angle = math.atan2(np.linalg.norm(axis), np.dot(source, target))
+    return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix()

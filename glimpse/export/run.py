@@ -21,13 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
+from glimpse.cameras.align import rotation_between
 from glimpse.errors import GlimpseError
 from glimpse.export.meshes import person_vertex_colours, posed_vertices, write_mesh_glb
-from glimpse.export.splats import frame_splats, posed_person_splats, rotated_splats, rotation_between, with_sh_degree
+from glimpse.export.splats import frame_splats, posed_person_splats, rotated_splats, with_sh_degree
 from glimpse.gaussians.ply import GaussianSplats, write_gaussians_ply
 from glimpse.io.colmap_text import write_colmap_text
 from glimpse.io.images import frame_name
 from glimpse.io.progress import progress
+from glimpse.io.staging import staged_folder
 from glimpse.replay.cameras import mean_up
 from glimpse.replay.finished import FinishedRun
 
@@ -62,13 +64,19 @@ def export_run(run: FinishedRun, frame_ids: list[int], out: Path, sh_degree: int
         raise GlimpseError(f"frames {missing or frame_ids}: not input frames with a camera in {run.folder / '01_sfm'} "
                            f"(frames {min(run.cameras)}..{max(run.cameras)})")
     turn = world_rotation(run, up)
+    with staged_folder(out) as tmp:
+        _write_export(run, frame_ids, sh_degree, up, turn, tmp)
+    return out
+
+
+def _write_export(run: FinishedRun, frame_ids: list[int], sh_degree: int | None, up: str, turn: np.ndarray,
+                  tmp: Path) -> None:
+    """export_run's files, into the staging folder ``tmp``."""
 
     def written(splats: GaussianSplats) -> GaussianSplats:
         return rotated_splats(_degree(splats, sh_degree), turn)
 
-    tmp = out.with_name(out.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    (tmp / "people").mkdir(parents=True)
+    (tmp / "people").mkdir()
     scenes, people_doc = [], {}
     faces = run.body_model.faces.cpu().numpy()
     colours = {person.pid: person_vertex_colours(person) for person in run.people}
@@ -99,6 +107,3 @@ def export_run(run: FinishedRun, frame_ids: list[int], out: Path, sh_degree: int
                     "z forward), or structure from motion's (its own units); canonical.ply, body.npz and "
                     "skinning.npz stay in the run's frames"}
     (tmp / "export.json").write_text(json.dumps(doc, indent=2) + "\n")
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.rename(out)
-    return out

@@ -114,21 +114,6 @@ def frame_splats(background: GaussianModel | None, people: Sequence[PersonGaussi
     return concatenate(parts)
 
 
-def rotation_between(source: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """[3, 3] the smallest rotation taking unit vector ``source`` to unit vector ``target`` (a half turn about an
-    axis perpendicular to both when they are opposite)."""
-    source, target = source / np.linalg.norm(source), target / np.linalg.norm(target)
-    axis = np.cross(source, target)
-    if np.linalg.norm(axis) < 1e-9:
-        if np.dot(source, target) > 0:
-            return np.eye(3)
-        helper = np.eye(3)[np.argmin(np.abs(source))]
-        axis = np.cross(source, helper)
-        return Rotation.from_rotvec(math.pi * axis / np.linalg.norm(axis)).as_matrix()
-    angle = math.atan2(np.linalg.norm(axis), np.dot(source, target))
-    return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix()
-
-
 @torch.no_grad()
 def rotated_splats(splats: GaussianSplats, rotation: np.ndarray) -> GaussianSplats:
     """The same Gaussians in a world turned by ``rotation`` [3, 3] (new point = rotation @ old point): means,

@@ -116,11 +116,13 @@ def build_parted_pose_prior(sources: list[str], floor_deg: float, mixture_joints
     rest = np.setdiff1d(np.arange(3 * len(SMPL_BODY_JOINTS)), mixed)
     parts = ((torch.as_tensor(mixed), build_pose_prior(sources, floor_deg, dtype, True, mixed)),
              (torch.as_tensor(rest), build_pose_prior(sources, floor_deg, dtype, False, rest)))
-    full = build_pose_prior(sources, floor_deg, dtype, False)
+    mean = torch.empty(3 * len(SMPL_BODY_JOINTS), dtype=dtype)
+    for index, prior in parts:  # each part's mean is the mean of all the poses over its numbers
+        mean[index] = prior.mean
     description = (f"a mixture of {len(sources)} Gaussians (one per motion) over the rotations of "
                    f"{', '.join(mixture_joints)}, one Gaussian over the other joints, fitted to "
-                   f"{full.description.split(' fitted to ', 1)[1]}")
-    return PartedPosePrior(parts, full.mean, description)
+                   f"{parts[1][1].description.split(' fitted to ', 1)[1]}")
+    return PartedPosePrior(parts, mean, description)
 
 
 def build_pose_prior(sources: list[str], floor_deg: float, dtype: torch.dtype = torch.float64,

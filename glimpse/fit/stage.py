@@ -17,12 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
 
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.body.motion import interpolate_pose_sequence
 from glimpse.body.params import BodyParams, read_scene_smpl
+from glimpse.cameras.align import rotation_between
 from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
@@ -274,11 +274,7 @@ def onto_viewing_rays(relative: np.ndarray, pixels: np.ndarray, weight: np.ndarr
         if not seen.any():
             continue
         ray = np.linalg.solve(K[t], np.append(pixels[t, seen].mean(0), 1.0))
-        ray /= np.linalg.norm(ray)
-        axis = np.cross([0.0, 0.0, 1.0], ray)
-        angle = np.arctan2(np.linalg.norm(axis), ray[2])
-        if np.linalg.norm(axis) > 0:
-            out[t] = relative[t] @ Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix().T
+        out[t] = relative[t] @ rotation_between(np.array([0.0, 0.0, 1.0]), ray).T
     return out
 
 

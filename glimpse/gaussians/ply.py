@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import os
 import re
-import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +43,7 @@ import torch
 import torch.nn.functional as F
 
 from glimpse.errors import GlimpseError
+from glimpse.io.staging import staged_file
 
 GAUSSIANS_FORMAT = "glimpse-gaussians/1"
 FORMAT_FAMILY = "glimpse-gaussians/"
@@ -267,17 +267,9 @@ def write_gaussians_ply(
     _check_sh_degree_metadata(path, metadata, splats.sh_degree)
     names = gaussian_property_names(splats.sh_degree)
     header, records = _header(len(splats), names, metadata), _pack_records(splats)
-    # A unique hidden name next to the target (same file system, so os.replace is atomic);
-    # opened with "x" so it gets the usual permissions (umask), unlike tempfile.mkstemp.
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        with tmp.open("xb") as f:
-            f.write(header)
-            f.write(records.reshape(-1).view(np.uint8))  # buffer protocol, no copy
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with staged_file(path) as tmp, tmp.open("xb") as f:
+        f.write(header)
+        f.write(records.reshape(-1).view(np.uint8))  # buffer protocol, no copy
 
 
 # --- reading --------------------------------------------------------------------------

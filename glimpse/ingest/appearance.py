@@ -37,18 +37,20 @@ def appearance(image: np.ndarray, mask: np.ndarray, split_y: float, bins: int) -
     return np.stack(halves)
 
 
+def _shared_halves(a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The (half of a, half of b) pairs that both appearances have (a missing half is NaN)."""
+    return [(half_a, half_b) for half_a, half_b in zip(a, b) if not (np.isnan(half_a).any() or np.isnan(half_b).any())]
+
+
 def comparable(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether two appearances share a half that both have (else their distance says nothing)."""
-    return any(not (np.isnan(half_a).any() or np.isnan(half_b).any()) for half_a, half_b in zip(a, b))
+    return bool(_shared_halves(a, b))
 
 
 def appearance_distance(a: np.ndarray, b: np.ndarray) -> float:
     """Hellinger distance between two appearances, averaged over the halves both have; 1 when none."""
-    distances = []
-    for half_a, half_b in zip(a, b):
-        if np.isnan(half_a).any() or np.isnan(half_b).any():
-            continue
-        distances.append(float(np.sqrt(max(0.0, 1.0 - np.sum(np.sqrt(half_a * half_b))))))
+    distances = [float(np.sqrt(max(0.0, 1.0 - np.sum(np.sqrt(half_a * half_b))))) for half_a, half_b in
+                 _shared_halves(a, b)]
     return float(np.mean(distances)) if distances else 1.0
 
 

@@ -6,10 +6,11 @@ premultiplied into them (the render's colour already holds only what was drawn, 
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from glimpse.io.staging import staged_file
 
 RGB_CHANNELS = ("R", "G", "B")
 
@@ -30,11 +31,8 @@ def write_exr(path: str | Path, channels: dict[str, np.ndarray], attributes: dic
         raise ValueError(f"EXR channels must be [H, W] arrays of one size, found {sorted(shapes)}")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **(attributes or {})}
     pixels = {name: np.ascontiguousarray(values, dtype=np.float32) for name, values in channels.items()}
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with OpenEXR.File(header, pixels) as image:
+    with staged_file(Path(path)) as tmp, OpenEXR.File(header, pixels) as image:
         image.write(str(tmp))
-    os.replace(tmp, path)
 
 
 def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:

@@ -9,15 +9,15 @@ half-grey picture later.  Arrays follow the usual convention: ``(H, W)`` or
 from __future__ import annotations
 
 import io
-import os
 import re
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
+
+from glimpse.io.staging import staged_file
 
 if TYPE_CHECKING:  # reading and checking images (every make step) does not import torch
     import torch
@@ -138,9 +138,10 @@ def read_mask(path: str | Path) -> np.ndarray:
     return np.asarray(image, dtype=np.uint8) >= 128
 
 
-def rgb_to_uint8(rgb: torch.Tensor) -> np.ndarray:
-    """[H, W, 3] float colours in [0, 1] (clamped) -> [H, W, 3] uint8, rounded."""
-    return (rgb.detach().clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+def rgb_to_uint8(rgb: torch.Tensor | np.ndarray) -> np.ndarray:
+    """[H, W, 3] float colours in [0, 1] (clamped; a tensor or an array) -> [H, W, 3] uint8, rounded."""
+    values = rgb.detach().cpu().numpy() if hasattr(rgb, "detach") else np.asarray(rgb)
+    return (np.clip(values, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def write_png(path: str | Path, array: np.ndarray) -> None:
@@ -158,16 +159,8 @@ def write_png(path: str | Path, array: np.ndarray) -> None:
         raise ValueError(f"write_png needs an (H, W), (H, W, 3) or (H, W, 4) array; got {array.shape}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # a unique hidden name beside the target, opened with "x" so the file gets the usual
-    # permissions (umask), unlike tempfile.mkstemp's 0600
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        with tmp.open("xb") as handle:
-            Image.fromarray(np.ascontiguousarray(array)).save(handle, format="PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with staged_file(path) as tmp, tmp.open("xb") as handle:
+        Image.fromarray(np.ascontiguousarray(array)).save(handle, format="PNG")
 
 
 def frame_name(frame_id: int) -> str:

@@ -14,6 +14,7 @@ from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
 from glimpse.humans.compose import BACKGROUND_GROUP, FrameGaussians, frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
+from glimpse.io.images import rgb_to_uint8
 from glimpse.replay.finished import FinishedRun
 
 
@@ -118,15 +119,10 @@ def render_shot_passes(run: FinishedRun, shot: PinholeCamera, frame_id: int, edi
     return ShotPasses(out.rgb.clamp(0.0, 1.0).cpu().numpy(), out.alpha.cpu().numpy(), out.depth.cpu().numpy(), masks)
 
 
-def colour_uint8(passes: ShotPasses) -> np.ndarray:
-    """[H, W, 3] uint8 of the colour pass, rounded."""
-    return (passes.rgb * 255.0 + 0.5).astype(np.uint8)
-
-
 def render_shot(run: FinishedRun, shot: PinholeCamera, frame_id: int, edits: Edits, device: torch.device,
                 video_index: int = 0, driven: Sequence[PersonGaussians] = ()) -> np.ndarray:
     """[H, W, 3] uint8: the colour pass of render_shot_passes."""
-    return colour_uint8(render_shot_passes(run, shot, frame_id, edits, device, video_index, driven))
+    return rgb_to_uint8(render_shot_passes(run, shot, frame_id, edits, device, video_index, driven).rgb)
 
 
 def render_video_passes(run: FinishedRun, frames: Sequence[tuple[PinholeCamera, int]], edits: Edits,
@@ -142,4 +138,4 @@ def render_video(run: FinishedRun, frames: Sequence[tuple[PinholeCamera, int]], 
                  ) -> Iterator[np.ndarray]:
     """The frames of a video as [H, W, 3] uint8 (render_video_passes' colour)."""
     for passes in render_video_passes(run, frames, edits, device):
-        yield colour_uint8(passes)
+        yield rgb_to_uint8(passes.rgb)

@@ -4,9 +4,8 @@
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Iterator
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +14,13 @@ import torch
 from glimpse.body.motion import BodySequence
 from glimpse.errors import GlimpseError
 from glimpse.io.exr import RGB_CHANNELS, srgb_to_linear, write_exr
-from glimpse.io.images import write_png
+from glimpse.io.images import rgb_to_uint8, write_png
 from glimpse.io.progress import progress
+from glimpse.io.staging import staged_folder
 from glimpse.io.video import write_mp4
 from glimpse.replay.finished import load_finished_run
 from glimpse.replay.motion import motion_from_spec, retarget
-from glimpse.replay.render import Edits, ShotPasses, colour_uint8, pair_shots_and_times, render_video_passes
+from glimpse.replay.render import Edits, ShotPasses, pair_shots_and_times, render_video_passes
 from glimpse.replay.request import camera_shots, parse_times
 
 CPU = torch.device("cpu")
@@ -95,15 +95,15 @@ def render_command(run_dir: Path, camera: str, time: str, remove: str, backgroun
     out.parent.mkdir(parents=True, exist_ok=True)
     with ExitStack() as folders:
         if asked != ("rgb",):
-            exr = folders.enter_context(_replaced_folder(exr_folder(out)))
+            exr = folders.enter_context(staged_folder(exr_folder(out)))
             attributes = {"glimpse_run": str(run_dir), "glimpse_depth_units": _world_units(run_dir),
                           "glimpse_colour": "linear sRGB primaries"}
             rendered = _written_exr(rendered, exr, asked, attributes)
-        images = (colour_uint8(p) for p in rendered)
+        images = (rgb_to_uint8(p.rgb) for p in rendered)
         if out.suffix == ".mp4":
             write_mp4(out, images, fps)
             return out
-        pngs = folders.enter_context(_replaced_folder(out))
+        pngs = folders.enter_context(staged_folder(out))
         for k, image in enumerate(images):
             write_png(pngs / f"{k:06d}.png", image)
     return out
@@ -114,21 +114,6 @@ def _written_exr(rendered: Iterator[ShotPasses], folder: Path, asked: tuple[str,
     for k, passes in enumerate(rendered):
         write_exr(folder / f"{k:06d}.exr", exr_channels(passes, asked), attributes)
         yield passes
-
-
-@contextmanager
-def _replaced_folder(final: Path) -> Iterator[Path]:
-    """A fresh folder beside ``final`` to write into; it replaces ``final`` when the block succeeds."""
-    tmp = final.with_name(final.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    shutil.rmtree(final, ignore_errors=True)
-    tmp.rename(final)
 
 
 def _world_units(run_dir: Path) -> str:
