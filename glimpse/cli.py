@@ -20,6 +20,8 @@
   glimpse render RUN [--camera input|orbit[:DEG]|heldout:NAME|json:FILE|colmap:DIR] [--time T|A:B|all]
                  [--remove p1,p2] [--motion p0=walk.npz] [--no-background] [--scene SCENE] [--out video.mp4]
                                          a finished run from any camera at any time (docs/renders.md)
+  glimpse report RUN                     write RUN/report.html again from whatever stages have finished
+                                         (stage 07 writes it; docs/report.md)
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ EXAMPLES = {
     "render": "glimpse render runs/demo_small --camera orbit:30 --time 12 --remove p1 --out orbit.mp4\n"
               "  glimpse render runs/demo_small --motion p0=builtin:walk --out walk.mp4\n"
               "  glimpse render runs/demo_small --time 0:23 --passes rgb,alpha,depth,mask --out frames  # + frames_exr/",
+    "report": "glimpse report runs/demo_small   # then open runs/demo_small/report.html in a browser",
 }
 
 
@@ -150,6 +153,10 @@ def main(argv: list[str] | None = None) -> int:
                                                           "frame of them all (linear colour, alpha, depth in the "
                                                           "world's units, each person's visible mask) in "
                                                           "<out name>_exr/ beside the video or PNGs")
+    p_report = command("report", "write a run's report.html (what stage 07 writes) from its finished stages")
+    p_report.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
+    p_report.add_argument("--wait", type=float, default=None, help="seconds to wait when a stage holds the run "
+                                                                   "folder (default $GLIMPSE_LOCK_WAIT, else 0)")
     args = parser.parse_args(argv)
     try:
         return _dispatch(args)
@@ -217,6 +224,8 @@ def _dispatch(args: argparse.Namespace) -> int:
                              args.motion, args.motion_seconds, args.passes)
         print(f"rendered {out}")
         return 0
+    if args.command == "report":
+        return _report(args)
     if args.command == "run-dir":
         print(locate_run(args.scene, args.out).root)
         return 0
@@ -256,6 +265,26 @@ def _run(args: argparse.Namespace) -> int:
     status = run_stages(scene, args.out, args.params, args.stage, sys.executable,
                         Path(stages_dir) if stages_dir else None, args.wait)
     return EXIT_STAGE_FAILED if status else 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    """``glimpse report``: the report section the run's stage 07 recorded (else pipeline.yaml's), under the
+    run folder's lock."""
+    from glimpse.config import config_from_mapping, load_pipeline_yaml
+    from glimpse.pipeline.prepare import RunPaths, run_lock
+    from glimpse.report.config import ReportConfig
+    from glimpse.report.page import write_report
+    from glimpse.report.run_record import read_run
+
+    read_run(args.run)  # refuses a folder that is not a run before anything is written there
+    defaults = load_pipeline_yaml(resolve_auto=False)
+    manifest = args.run / "07_eval" / "manifest.json"
+    recorded = json.loads(manifest.read_text()).get("params", {}) if manifest.is_file() else {}
+    config = config_from_mapping(ReportConfig, recorded.get("report", defaults["report"]), "report")
+    with run_lock(RunPaths(args.run), "glimpse report", args.wait):
+        path = write_report(args.run, config, defaults)
+    print(f"wrote {path}")
+    return 0
 
 
 if __name__ == "__main__":

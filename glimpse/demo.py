@@ -42,6 +42,8 @@ def main() -> int:
     if result.returncode == 0:
         print("demo: the whole pipeline ran; stage 07's metrics:\n")
         print(_tables(run_dir / "07_eval" / "metrics.md"))
+        print(f"demo: the run report (plots, stills, videos, timings): open {(run_dir / 'report.html').resolve()} in a "
+              f"browser; `glimpse view {run_dir}` to look around the scene")
         return 0
     print(f"demo: stage {pending.name if pending else '?'} failed (see above)", file=sys.stderr)
     return result.returncode

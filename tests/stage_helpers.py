@@ -21,8 +21,10 @@ def stage_module(stage: str) -> ModuleType:
 
 
 def run(stage: str, scene: Path, out: Path, params: str = "") -> Path:
-    """Run ``stage`` on ``scene``; returns its output folder."""
-    return run_stage(stage, scene, out, params, stage_module(stage).run)
+    """Run ``stage`` on ``scene`` (and what it writes after publishing, as stage 07's report); returns its
+    output folder."""
+    module = stage_module(stage)
+    return run_stage(stage, scene, out, params, module.run, getattr(module, "write_run_report", None))
 
 
 def read_json(path: Path) -> dict:

@@ -234,6 +234,54 @@ def test_stage07_times_each_person_in_novel_poses_and_the_whole_scene(tiny):
     assert "| p0 |" in table and "| input views |" in table and "Protocol:" in table
 
 
+REPORT_LOADS = """async () => {
+  const images = [...document.images].map(i => ({src: i.getAttribute("src"), width: i.naturalWidth}));
+  const videos = await Promise.all([...document.querySelectorAll("video")].map(v => new Promise(done => {
+    const report = () => done({src: v.getAttribute("src"), ready: v.readyState, width: v.videoWidth,
+                               error: v.error ? v.error.code : null});
+    if (v.readyState >= 2) return report();
+    v.addEventListener("loadeddata", report); v.addEventListener("error", report); setTimeout(report, 10000);
+    v.preload = "auto"; v.load();
+  })));
+  return {images, videos};
+}"""
+
+
+def test_stage07_writes_a_report_whose_every_image_and_video_loads_in_a_browser(tiny):
+    from playwright.sync_api import sync_playwright
+
+    from tests.support.browser import launch
+
+    _, run_dir = tiny
+    page_path = run_dir / "report.html"
+    text = page_path.read_text()
+    for anchor in ("scene", "metrics", "views", "training", "bodies", "masks", "videos", "parameters", "timings",
+                   "logs"):
+        assert f'<section id="{anchor}">' in text
+    humans = read_json(run_dir / "07_eval" / "manifest.json")["summary"]["humans_psnr_db"]
+    assert f"PSNR {humans:.2f} dB" in text  # the headline is stage 07's
+    assert "06_joint_opt.schedule_scale" in text and "not run" not in text  # SHORT's overrides; every stage ran
+    with sync_playwright() as playwright:
+        browser = launch(playwright)
+        page = browser.new_page()
+        failed: list[str] = []
+        page.on("requestfailed", lambda request: failed.append(request.url))
+        page.goto(page_path.as_uri())
+        page.wait_for_load_state("load")
+        loaded = page.evaluate(REPORT_LOADS)
+        browser.close()
+    assert failed == []
+    pictures = {image["src"] for image in loaded["images"]}
+    assert pictures == {f"report_files/{p.name}" for p in (run_dir / "report_files").glob("*.png")}
+    assert {"report_files/loss_joint.png", "report_files/gaussians.png", "report_files/input_psnr.png",
+            "report_files/timings.png"} <= pictures
+    assert all(image["width"] > 0 for image in loaded["images"]), loaded["images"]
+    videos = {video["src"] for video in loaded["videos"]}
+    assert {f"07_eval/renders/{name}" for name in read_json(run_dir / "07_eval" / "manifest.json")["summary"]
+            ["renders"]} | {"02_smpl_fit/overlay.mp4", "06_joint_opt/renders/joint.mp4"} <= videos
+    assert all(v["ready"] >= 2 and v["width"] > 0 and v["error"] is None for v in loaded["videos"]), loaded["videos"]
+
+
 def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):
     scene, run_dir = tiny
     metrics = read_json(run_dir / "07_eval" / "metrics.json")

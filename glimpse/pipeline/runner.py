@@ -161,14 +161,20 @@ def _check_reads(spec: StageSpec, reads: set[str]) -> None:
                            f"a change to them would not rerun it: declare them there")
 
 
-def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]) -> Path:
-    """Lock the run folder, prepare, run ``body`` in a temporary folder, publish; return the output folder."""
+def run_stage(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None],
+              after_publish: Callable[[StageContext], None] | None = None) -> Path:
+    """Lock the run folder, prepare, run ``body`` in a temporary folder, publish; return the output folder.
+    ``after_publish`` (still under the lock) writes what is made from the published output and lives beside
+    the stage folders (stage 07's report.html); ``ctx.out`` no longer exists by then."""
     with run_lock(locate_run(scene_root, out_root, cli_params=cli_params), f"stage {stage}"):
-        return _run_locked(stage, scene_root, out_root, cli_params, body)
+        final, ctx = _run_locked(stage, scene_root, out_root, cli_params, body)
+        if after_publish is not None:
+            after_publish(ctx)
+        return final
 
 
 def _run_locked(stage: str, scene_root: Path, out_root: Path, cli_params: str, body: Callable[[StageContext], None]
-                ) -> Path:
+                ) -> tuple[Path, StageContext]:
     spec = stage_spec(stage)
     run, resolved = prepare_run(scene_root, out_root, cli_params)
     params_doc = json.loads(run.params_file(stage).read_text())
@@ -208,7 +214,7 @@ def _run_locked(stage: str, scene_root: Path, out_root: Path, cli_params: str, b
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     shutil.rmtree(ctx.work, ignore_errors=True)
-    return run.stage_dir(stage)
+    return run.stage_dir(stage), ctx
 
 
 @contextmanager
@@ -256,7 +262,8 @@ def remove_orphans(folder: Path, prefix: str) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
-def stage_main(stage: str, body: Callable[[StageContext], None], description: str) -> None:
+def stage_main(stage: str, body: Callable[[StageContext], None], description: str,
+               after_publish: Callable[[StageContext], None] | None = None) -> None:
     """Command-line entry point of ``stages/<stage>/run.py``.
 
     Bad input exits with status EXIT_BAD_INPUT and one message, Ctrl-C with EXIT_INTERRUPTED (glimpse.errors;
@@ -272,7 +279,7 @@ def stage_main(stage: str, body: Callable[[StageContext], None], description: st
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(message)s")
     try:
-        final = run_stage(stage, args.scene, args.out, args.params, body)
+        final = run_stage(stage, args.scene, args.out, args.params, body, after_publish)
     except GlimpseError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)

@@ -16,6 +16,7 @@ from glimpse.masks.config import MasksConfig
 from glimpse.prior import prior_sections
 from glimpse.prior.config import PriorConfig
 from glimpse.render.config import RenderConfig
+from glimpse.report.config import ReportConfig
 from glimpse.sfm.config import CamerasConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -24,6 +25,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "render": RenderConfig,
     "prior": PriorConfig,
     **prior_sections(),
+    "report": ReportConfig,
     "ingest": IngestConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,

@@ -85,7 +85,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "06_joint_opt"),
-        reads=("compute", "body.model_path", "render"),
+        reads=("compute", "body.model_path", "render", "report"),
         scene_inputs=("eval/**/*",),
     ),
 )
@@ -97,8 +97,9 @@ STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # cache only what is kept in memory; compute.auto_schedule_scale is already in the schedule_scale it resolved.
 NOT_RESULT_KEYS: tuple[str, ...] = ("compute.threads", "compute.frame_cache", "compute.frame_read_ahead",
                                      "compute.auto_schedule_scale", "*.checkpoint_every")
-# The shared sections of pipeline.yaml (patterns): every other section is one stage's own.
-SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_*", "diffusion")
+# The shared sections of pipeline.yaml (patterns): every other section is one stage's own (or, as ingest, one
+# command's). report is stage 07's and `glimpse report`'s.
+SHARED_SECTIONS: tuple[str, ...] = ("compute", "body", "render", "prior", "prior_*", "diffusion", "report")
 
 
 def dag_makefile(stages: tuple[StageSpec, ...] = STAGES) -> str:

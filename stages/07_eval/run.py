@@ -18,9 +18,12 @@ Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
   speed.json     glimpse-speed/1: novel-pose frames per second of each person at each size, and of the whole
                  scene at the input resolution, with peak memory (glimpse/eval/speed.py; 07_eval.speed)
   speed.md       the same as Markdown tables
+Then, beside the stage folders: OUT/<scene>/report.html and report_files/, the run report (glimpse/report/;
+section report; refreshed by `glimpse report RUN`).
 """
 
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -29,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from glimpse.body.config import resolve_model_path  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
+from glimpse.config import load_pipeline_yaml  # noqa: E402
 from glimpse.errors import GlimpseError  # noqa: E402
 from glimpse.eval.never_seen import PosedBodies, person_mean_colours  # noqa: E402
 from glimpse.eval.renders import write_render_set  # noqa: E402
@@ -43,9 +47,11 @@ from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.metrics.lpips import LPIPS  # noqa: E402
 from glimpse.pipeline.runner import StageContext, stage_main  # noqa: E402
 from glimpse.replay.finished import FinishedRun  # noqa: E402
+from glimpse.report.page import write_report  # noqa: E402
 from glimpse.scene import load_scene  # noqa: E402
 
 STAGE = "07_eval"
+log = logging.getLogger("glimpse.07_eval")
 
 
 def run(ctx: StageContext) -> None:
@@ -92,5 +98,14 @@ def run(ctx: StageContext) -> None:
                         **headline(tables)})
 
 
+def write_run_report(ctx: StageContext) -> None:
+    """report.html from the published outputs. A failure is logged, not raised: the metrics and videos are
+    published already, and `glimpse report RUN` writes the report again."""
+    try:
+        write_report(ctx.run.root, ctx.section("report"), load_pipeline_yaml(resolve_auto=False))
+    except Exception:
+        log.exception("the run report was not written; run `glimpse report %s` to retry", ctx.run.root)
+
+
 if __name__ == "__main__":
-    stage_main(STAGE, run, __doc__)
+    stage_main(STAGE, run, __doc__, write_run_report)
