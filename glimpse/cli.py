@@ -22,6 +22,8 @@
                                          a finished run from any camera at any time (docs/renders.md)
   glimpse report RUN                     write RUN/report.html again from whatever stages have finished
                                          (stage 07 writes it; docs/report.md)
+  glimpse view RUN [--host H] [--port P] serve a finished run in the browser: orbit, scrub time, show or hide
+                                         people, play a new motion, save screenshots (docs/viewer.md)
 """
 
 from __future__ import annotations
@@ -56,6 +58,8 @@ EXAMPLES = {
               "  glimpse render runs/demo_small --motion p0=builtin:walk --out walk.mp4\n"
               "  glimpse render runs/demo_small --time 0:23 --passes rgb,alpha,depth,mask --out frames  # + frames_exr/",
     "report": "glimpse report runs/demo_small   # then open runs/demo_small/report.html in a browser",
+    "view": "glimpse view runs/demo_small        # then open http://127.0.0.1:8080 ; Ctrl-C stops it\n"
+            "  glimpse view runs/demo_small --host 0.0.0.0 --port 9000 --motion dance.npz",
 }
 
 
@@ -157,6 +161,16 @@ def main(argv: list[str] | None = None) -> int:
     p_report.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
     p_report.add_argument("--wait", type=float, default=None, help="seconds to wait when a stage holds the run "
                                                                    "folder (default $GLIMPSE_LOCK_WAIT, else 0)")
+    p_view = command("view", "serve a finished run in the browser (viser; docs/viewer.md)")
+    p_view.add_argument("run", type=Path, help="the run folder, OUT/<scene>")
+    p_view.add_argument("--host", default=None, help="address to listen on (default: view.host, 127.0.0.1)")
+    p_view.add_argument("--port", type=int, default=None, help="TCP port (default: view.port, 8080)")
+    p_view.add_argument("--out", type=Path, default=None, help="where screenshots go (default: RUN/view)")
+    p_view.add_argument("--motion", action="append", default=[], metavar="FILE.npz",
+                        help="a motion (.npz, AMASS-style or smplx-style) offered beside the built-in ones; "
+                             "repeatable")
+    p_view.add_argument("--params", default=_params_default(), help='overrides "view.key=value ..." (env '
+                                                                    'GLIMPSE_PARAMS)')
     args = parser.parse_args(argv)
     try:
         return _dispatch(args)
@@ -226,6 +240,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return 0
     if args.command == "report":
         return _report(args)
+    if args.command == "view":
+        return _view(args)
     if args.command == "run-dir":
         print(locate_run(args.scene, args.out).root)
         return 0
@@ -284,6 +300,40 @@ def _report(args: argparse.Namespace) -> int:
     with run_lock(RunPaths(args.run), "glimpse report", args.wait):
         path = write_report(args.run, config, defaults)
     print(f"wrote {path}")
+    return 0
+
+
+def _view(args: argparse.Namespace) -> int:
+    """``glimpse view``: serve until Ctrl-C (which ends it normally, status 0)."""
+    import time
+
+    import torch
+
+    from glimpse.config import apply_override, config_from_mapping, load_pipeline_yaml, parse_cli_params
+    from glimpse.replay.finished import load_finished_run
+    from glimpse.view.config import ViewConfig
+    from glimpse.view.server import ViewerServer
+    from glimpse.view.session import ViewSession
+
+    params = load_pipeline_yaml(resolve_auto=False)
+    for key, value in parse_cli_params(args.params):
+        if key.startswith("view."):
+            apply_override(params, key, value, "--params")
+    config = config_from_mapping(ViewConfig, params["view"], "view")
+    for path in args.motion:
+        if not Path(path).is_file():
+            raise GlimpseError(f"--motion {path}: no such file")
+    session = ViewSession(load_finished_run(args.run), config, torch.device("cpu"))
+    viewer = ViewerServer(session, args.out or args.run / "view", args.host or config.host,
+                          config.port if args.port is None else args.port, tuple(args.motion))
+    print(f"viewing {args.run} at http://{args.host or config.host}:{viewer.port} (Ctrl-C stops)", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        print("viewer stopped")
+    finally:
+        viewer.stop()
     return 0
 
 

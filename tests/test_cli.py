@@ -34,6 +34,10 @@ def test_a_wrong_command_line_exits_2_and_bad_input_3(tmp_path, capsys):
     assert stop.value.code == EXIT_USAGE
     assert cli.main(["validate", str(tmp_path / "missing")]) == EXIT_BAD_INPUT
     assert "no such scene folder" in capsys.readouterr().err
+    assert cli.main(["view", str(tmp_path)]) == EXIT_BAD_INPUT  # not a finished run: nothing is served
+    assert "no finished stage 06" in capsys.readouterr().err
+    assert cli.main(["view", str(tmp_path), "--params", "view.port=-1"]) == EXIT_BAD_INPUT
+    assert "pipeline.yaml view: need 0 <= port" in capsys.readouterr().err
 
 
 def test_an_interrupt_exits_130_with_a_message(monkeypatch, capsys):

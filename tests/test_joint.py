@@ -4,7 +4,9 @@ rotation against SVD, the schedule, the occluder exclusion, resume, and the stag
 
 from __future__ import annotations
 
+import io
 import math
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -18,7 +20,7 @@ from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams, read_body_params
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
-from glimpse.errors import EXIT_BAD_INPUT, ConfigError
+from glimpse.errors import EXIT_BAD_INPUT, ConfigError, GlimpseError
 from glimpse.eval.never_seen import PosedBodies
 from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
 from glimpse.eval.views import ViewSet, heldout_views
@@ -280,6 +282,93 @@ def test_stage07_writes_a_report_whose_every_image_and_video_loads_in_a_browser(
     assert {f"07_eval/renders/{name}" for name in read_json(run_dir / "07_eval" / "manifest.json")["summary"]
             ["renders"]} | {"02_smpl_fit/overlay.mp4", "06_joint_opt/renders/joint.mp4"} <= videos
     assert all(v["ready"] >= 2 and v["width"] > 0 and v["error"] is None for v in loaded["videos"]), loaded["videos"]
+
+
+def view_config(**changes):
+    from glimpse.view.config import ViewConfig
+
+    config = config_from_mapping(ViewConfig, load_pipeline_yaml(resolve_auto=False)["view"], "view")
+    return replace(config, **changes)
+
+
+def test_the_viewer_renders_what_the_run_renders_and_follows_its_controls(tiny, tmp_path):
+    from glimpse.replay.finished import load_finished_run
+    from glimpse.replay.render import Edits, render_shot, render_shot_passes
+    from glimpse.view.camera import pinhole_from_viewer, render_size, viewer_from_pinhole
+    from glimpse.view.session import NO_MOTION, ViewSession
+
+    _, run_dir = tiny
+    run = load_finished_run(run_dir)
+    session = ViewSession(run, view_config(), torch.device("cpu"))
+    camera = session.start_camera()
+    back = pinhole_from_viewer(*viewer_from_pinhole(camera), camera.width, camera.height)
+    assert np.allclose(back.R, camera.R, atol=1e-9) and np.allclose(back.t, camera.t, atol=1e-9)
+    assert np.allclose(back.K, camera.K, atol=1e-9)  # the fixture's principal point is centred, as the browser's
+    frame = session.state.frame_id
+    shown = session.render(camera)
+    assert np.array_equal(shown, render_shot(run, camera, frame, Edits(), torch.device("cpu")))
+    p0 = render_shot_passes(run, camera, frame, Edits(), torch.device("cpu")).masks["p0"] > 1e-3
+    assert p0.sum() > 20
+    session.set_visible("p0", False)
+    without = session.render(camera).astype(int)
+    changed = np.abs(without - shown.astype(int)).max(axis=2) > 0
+    assert changed[p0].mean() > 0.5 and not changed[~p0].any()  # only p0's pixels, most of them
+    session.set_visible("p0", True)
+    session.set_background(False)
+    people = session.render(camera)
+    alpha = render_shot_passes(run, camera, frame, Edits(background=False), torch.device("cpu")).alpha
+    assert people[alpha < 1e-4].max() == 0 and people[alpha > 0.5].max() > 0
+    session.set_background(True)
+    session.set_motion("p0", "builtin:walk")
+    start = session.render(camera).astype(int)
+    for _ in range(20):
+        session.step()
+    assert session.state.motion_index == 20 and session.state.frame_id == frame  # the scene stays frozen
+    assert np.abs(session.render(camera).astype(int) - start).max() > 50  # p0 walked
+    session.set_motion("p0", NO_MOTION)
+    assert np.array_equal(session.render(camera), shown)
+    session.step()
+    assert session.state.frame_id == session.frames[(session.frames.index(frame) + 1) % len(session.frames)]
+    shot = session.screenshot(camera, tmp_path / "shots")
+    assert Image.open(shot).size == render_size(camera.width, camera.height, session.config.still_max_side_px)
+    assert session.screenshot(camera, tmp_path / "shots") != shot  # nothing is overwritten
+    with pytest.raises(GlimpseError, match="no person 'p9'"):
+        session.set_visible("p9", False)
+
+
+def test_the_viewer_serves_a_browser_renders_its_camera_and_takes_its_clicks(tiny, tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    from glimpse.replay.finished import load_finished_run
+    from glimpse.view.server import ViewerServer
+    from glimpse.view.session import ViewSession
+    from tests.support.browser import free_port, launch
+
+    _, run_dir = tiny
+    session = ViewSession(load_finished_run(run_dir), view_config(sharp_after_s=0.1), torch.device("cpu"))
+    viewer = ViewerServer(session, tmp_path / "shots", "127.0.0.1", free_port())
+    try:
+        with sync_playwright() as playwright:
+            browser = launch(playwright, webgl=True)
+            page = browser.new_page(viewport={"width": 640, "height": 480})
+            page.goto(f"http://127.0.0.1:{viewer.port}")
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not any(v.sharp for v in viewer.views.values()):
+                page.wait_for_timeout(100)
+            (view,) = viewer.views.values()
+            assert view.sharp and view.last_size == (640, 480)  # the canvas, at most still_max_side_px
+            page.wait_for_timeout(500)
+            picture = np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB")).astype(int)
+            assert picture[:, :300].std(axis=(0, 1)).max() > 20  # the scene, not an empty page
+            page.get_by_role("button", name="save screenshot").click()
+            page.get_by_role("checkbox", name="p0").click()
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline and not (viewer.screenshots and session.state.hidden):
+                page.wait_for_timeout(100)
+            browser.close()
+    finally:
+        viewer.stop()
+    assert session.state.hidden == {"p0"} and viewer.screenshots and viewer.screenshots[0].is_file()
 
 
 def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_path):

@@ -17,6 +17,7 @@ from glimpse.prior import prior_sections
 from glimpse.prior.config import PriorConfig
 from glimpse.render.config import RenderConfig
 from glimpse.report.config import ReportConfig
+from glimpse.view.config import ViewConfig
 from glimpse.sfm.config import CamerasConfig
 
 SECTION_CONFIGS: dict[str, type] = {
@@ -26,6 +27,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "prior": PriorConfig,
     **prior_sections(),
     "report": ReportConfig,
+    "view": ViewConfig,
     "ingest": IngestConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,

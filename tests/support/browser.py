@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import socket
 
 import pytest
 
@@ -28,7 +29,15 @@ def chromium_path() -> str:
     return found
 
 
-def launch(playwright):
-    """A headless Chromium browser (the caller closes it)."""
-    return playwright.chromium.launch(executable_path=chromium_path(), headless=True,
-                                      args=["--no-sandbox", "--disable-gpu"])
+def launch(playwright, webgl: bool = False):
+    """A headless Chromium browser (the caller closes it); ``webgl``: with WebGL in software (SwiftShader), for
+    pages that draw with three.js such as the viewer's."""
+    flags = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"] if webgl else ["--disable-gpu"]
+    return playwright.chromium.launch(executable_path=chromium_path(), headless=True, args=["--no-sandbox", *flags])
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
