@@ -55,7 +55,7 @@ MODELS_DIR ?= models/blazepose
 # The stages are the folders of stages/ (a test checks they are the registry's).
 STAGES := $(sort $(patsubst stages/%/run.py,%,$(wildcard stages/*/run.py)))
 
-.PHONY: help venv models ingest all validate test bench demo clean-stage print-dag free-body $(STAGES)
+.PHONY: help venv models ingest all validate test bench docs demo clean-stage print-dag free-body $(STAGES)
 
 help:
 	@echo "make demo [DEMO_SIZE=full]     set up, generate the demo scene, run the pipeline on it"
@@ -66,6 +66,7 @@ help:
 	@echo "make validate SCENE=dir        check a scene against docs/SCENE_FORMAT.md"
 	@echo "make clean-stage STAGE=x SCENE=dir   remove one stage's output"
 	@echo "make test | make bench         tests | benchmarks"
+	@echo "make docs                      docs/ as a static site in site/ (open site/index.html)"
 	@echo "options: OUT=dir (default runs/), PARAMS=\"section.key=value ...\", PIPELINE_YAML=file, WAIT=seconds"
 
 $(VENV)/.installed: pyproject.toml requirements-nodeps.txt $(CONSTRAINTS)
@@ -80,6 +81,14 @@ venv: $(VENV)/.installed
 $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml $(CONSTRAINTS)
 	$(PY) -m pip install --quiet -c $(CONSTRAINTS) --editable ".[sds,test]"
 	touch $@
+
+$(VENV)/.installed-docs: $(VENV)/.installed pyproject.toml $(CONSTRAINTS)
+	$(PY) -m pip install --quiet -c $(CONSTRAINTS) --editable ".[sds,docs]"
+	touch $@
+
+docs: $(VENV)/.installed-docs
+	$(VENV)/bin/mkdocs build --strict --quiet
+	@echo "docs: open $(CURDIR)/site/index.html"
 
 $(MODELS_DIR)/.installed: tools/install_blazepose.py | $(VENV)/.installed
 	$(PY) tools/install_blazepose.py $(MODELS_DIR)
