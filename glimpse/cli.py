@@ -3,6 +3,8 @@
   glimpse ingest VIDEO [SCENE_DIR]       a video -> a scene: frames, every person found and tracked (keypoints,
                                          masks), a preview video and a tracks report (docs/ingest.md); SCENE_DIR
                                          defaults to OUT/scenes/<video name>
+  glimpse import DATASET SOURCE SCENE_DIR [--sequence S] [--cameras IN,HELD,...] [--frames A:B[:STEP]]
+                                         a dataset's sequence -> a scene: zju-mocap (docs/datasets.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
@@ -44,6 +46,8 @@ EXIT_STATUSES = f"""exit statuses: 0 done; {EXIT_STAGE_FAILED} a stage failed (g
 # One example per command, shown by `glimpse COMMAND --help`.
 EXAMPLES = {
     "ingest": "glimpse ingest clip.mp4 runs/scenes/clip   # then: glimpse run --scene runs/scenes/clip",
+    "import": "glimpse import zju-mocap /data/zju_mocap runs/scenes/zju_377 --sequence 377 "
+              "--body-model ~/smpl/SMPL_NEUTRAL.pkl --frames 0:570",
     "validate": "glimpse validate runs/scenes/demo_small",
     "run": 'glimpse run --scene runs/scenes/demo_small --params "06_joint_opt.schedule_scale=0.05"\n'
            "  glimpse run --video clip.mp4                 # ingest (when the video is newer), then every stage\n"
@@ -101,6 +105,22 @@ def main(argv: list[str] | None = None) -> int:
                                                                "succeeds; default OUT/scenes/<video name>)")
     p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
+    p_import = command("import", "a dataset's sequence -> a glimpse-scene/1 folder (docs/datasets.md)")
+    p_import.add_argument("dataset", help="zju-mocap")
+    p_import.add_argument("source", type=Path, help="the dataset's folder (with --sequence) or one sequence's")
+    p_import.add_argument("scene", type=Path, help="the scene folder to write (replaced when the import succeeds)")
+    p_import.add_argument("--sequence", default=None, help="the sequence, e.g. 377 (ZJU-MoCap)")
+    p_import.add_argument("--cameras", default=None, help="the input camera, then held-out ones, comma-separated "
+                                                          "(indices from 0, or the dataset's names; default: the "
+                                                          "protocol docs/datasets.md gives)")
+    p_import.add_argument("--frames", default=None, help="A:B[:STEP] of the sequence's frames (B excluded; "
+                                                         "default: all)")
+    p_import.add_argument("--eval-every", type=int, default=30, help="held-out images every this many imported "
+                                                                     "frames (default 30, HumanNeRF's protocol)")
+    p_import.add_argument("--body-model", type=Path, default=None, help="the SMPL model file the dataset's bodies "
+                                                                        "belong to (e.g. SMPL_NEUTRAL.pkl)")
+    p_import.add_argument("--fps", type=float, default=None, help="frames per second, where the dataset's files "
+                                                                  "do not say")
     p_val = command("validate", "check a scene folder against glimpse-scene/1")
     p_val.add_argument("scene", type=Path)
     p_run = command("run", "run the stages that are out of date (what make all and make <stage> call)")
@@ -192,6 +212,19 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         ingest(args.video, Path(args.scene) if args.scene else default_scene_dir(args.video, args.out),
                load_ingest_config(args.params))
+        return 0
+    if args.command == "import":
+        from glimpse.importers import import_dataset
+        from glimpse.importers.common import ImportOptions, parse_span
+
+        if args.eval_every < 1:
+            raise GlimpseError(f"--eval-every {args.eval_every}: must be at least 1")
+        options = ImportOptions(args.sequence, tuple(args.cameras.split(",")) if args.cameras else None,
+                                parse_span(args.frames) if args.frames else None, args.eval_every,
+                                args.body_model, args.fps)
+        scene = import_dataset(args.dataset, args.source, args.scene, options)
+        print(f"imported {args.dataset} into {scene} (check it: glimpse validate {scene}; run it: "
+              f"glimpse run --scene {scene})")
         return 0
     if args.command == "validate":
         from glimpse.errors import SceneError

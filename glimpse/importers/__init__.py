@@ -1,0 +1,23 @@
+"""Dataset importers: ``glimpse import DATASET SOURCE SCENE_DIR`` writes a dataset's sequence as a
+glimpse-scene/1 folder through the scene writer, one module per dataset (docs/datasets.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from glimpse.errors import GlimpseError
+from glimpse.importers.common import ImportOptions
+from glimpse.importers.zju_mocap import import_zju_mocap
+
+Importer = Callable[[Path, Path, ImportOptions], Path]
+DATASETS: dict[str, Importer] = {"zju-mocap": import_zju_mocap}
+
+
+def import_dataset(dataset: str, source: Path, scene_dir: Path, options: ImportOptions) -> Path:
+    """Import ``source`` (the dataset's folder, or one sequence's) into ``scene_dir``; returns the scene."""
+    if dataset not in DATASETS:
+        raise GlimpseError(f"unknown dataset {dataset!r}; Glimpse imports {', '.join(sorted(DATASETS))}")
+    if not Path(source).is_dir():
+        raise GlimpseError(f"{source}: no such folder")
+    return DATASETS[dataset](Path(source), Path(scene_dir), options)
