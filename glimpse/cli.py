@@ -9,6 +9,9 @@
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
                                          or rerun stage X (make X); a video is ingested first when it is newer
+  glimpse batch SCENE_OR_VIDEO... --executor local|ray|slurm [--out O] [--jobs N] [--retries R]
+                                         many scenes through every stage, here, on Ray or on Slurm; failed ones
+                                         retried and resumed; OUT/batch.md and batch.json (docs/batch.md)
   glimpse clean-stage --scene S --out O STAGE
                                          remove one stage's output and work folder (under the run's lock)
   glimpse prepare --scene S --out O [--whole-pipeline]
@@ -52,6 +55,9 @@ EXAMPLES = {
     "run": 'glimpse run --scene runs/scenes/demo_small --params "06_joint_opt.schedule_scale=0.05"\n'
            "  glimpse run --video clip.mp4                 # ingest (when the video is newer), then every stage\n"
            "  glimpse run --scene S --stage 06_joint_opt   # rerun one stage (and what it needs)",
+    "batch": "glimpse batch runs/scenes/* --executor local --out runs\n"
+             "  glimpse batch takes/*.mp4 --executor slurm --slurm-profile cluster.yaml --out /shared/runs\n"
+             "  glimpse batch /data/scenes/* --executor ray --ray-address auto --gpus-per-job 1 --out /shared/runs",
     "clean-stage": "glimpse clean-stage --scene runs/scenes/demo_small 06_joint_opt",
     "prepare": "glimpse prepare --scene runs/scenes/demo_small --whole-pipeline",
     "params": "glimpse params --scene runs/scenes/demo_small --stage 04_bg_pretrain",
@@ -131,6 +137,21 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
     p_run.add_argument("--wait", type=float, default=None, help="seconds to wait when another run holds the run "
                                                                 "folder (default $GLIMPSE_LOCK_WAIT, else 0)")
+    p_batch = command("batch", "many scenes or videos through every stage: here, on Ray or on Slurm (docs/batch.md)")
+    p_batch.add_argument("sources", nargs="+", type=Path, help="scene folders and/or videos (videos are ingested)")
+    p_batch.add_argument("--executor", choices=("local", "ray", "slurm"), default="local")
+    p_batch.add_argument("--out", type=Path, default=Path("runs"), help="output root, on storage every worker sees")
+    p_batch.add_argument("--jobs", type=int, default=None, help="local: scenes at once (default batch.jobs)")
+    p_batch.add_argument("--retries", type=int, default=None, help="attempts after the first (default batch.retries)")
+    p_batch.add_argument("--cpus-per-job", type=int, default=None, help="ray / slurm: CPUs per scene")
+    p_batch.add_argument("--gpus-per-job", type=float, default=None, help="ray / slurm: GPUs per scene")
+    p_batch.add_argument("--ray-address", default=None, help="ray: the cluster (default batch.ray.address: auto)")
+    p_batch.add_argument("--slurm-profile", type=Path, default=None,
+                         help="slurm: a YAML file of batch.slurm settings (partition, time_min, account, setup, ...)")
+    p_batch.add_argument("--partition", default=None, help="slurm: the partition")
+    p_batch.add_argument("--time-min", type=int, default=None, help="slurm: minutes per job")
+    p_batch.add_argument("--params", default=_params_default(), help='overrides for every stage (and batch.*), '
+                                                                     '"section.key=value ..."')
     p_clean = command("clean-stage", "remove one stage's output (make clean-stage)")
     p_clean.add_argument("--scene", required=True, type=Path)
     p_clean.add_argument("--out", type=Path, default=Path("runs"))
@@ -242,6 +263,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return 0
     if args.command == "run":
         return _run(args)
+    if args.command == "batch":
+        from glimpse.batch.command import batch_command
+
+        return batch_command(args)
     if args.command == "clean-stage":
         from glimpse.pipeline.stages import named_stage
 

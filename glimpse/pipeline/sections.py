@@ -5,6 +5,7 @@ registry (glimpse/prior/__init__.py), each prior naming its own."""
 from __future__ import annotations
 
 from glimpse.background.config import BackgroundConfig
+from glimpse.batch.config import BatchConfig
 from glimpse.body.config import BodyConfig
 from glimpse.compute import ComputeConfig
 from glimpse.crops.config import CropsConfig
@@ -28,6 +29,7 @@ SECTION_CONFIGS: dict[str, type] = {
     **prior_sections(),
     "report": ReportConfig,
     "view": ViewConfig,
+    "batch": BatchConfig,
     "ingest": IngestConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
