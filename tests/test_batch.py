@@ -97,7 +97,7 @@ def test_local_batch_runs_every_scene_resumes_the_failed_one_and_summarises(loca
     code, out = local_batch
     assert code == 0
     doc = json.loads((out / "batch.json").read_text())
-    assert doc["format"] == "glimpse-batch/1" and doc["counts"] == {"done": 2, "failed": 0, "bad input": 0}
+    assert doc["format"] == "glimpse-batch/1" and doc["counts"] == {"done": 2, "failed": 0, "bad input": 0, "interrupted": 0}
     assert [s["label"] for s in doc["scenes"]] == ["alpha", "beta"]  # the repeated source ran once
     from glimpse.batch.jobs import Attempt, SceneResult
 
@@ -171,6 +171,12 @@ def test_bad_sources_are_named_and_summaries_count_failures(scenes, tmp_path, ca
     profile.write_text("partitions: gpu\n")
     assert cli(["batch", str(folders[0]), "--executor", "slurm", "--slurm-profile", str(profile)]) == EXIT_BAD_INPUT
     assert "partitions" in capsys.readouterr().err
+    video = SceneJob(tmp_path / "take 1.mp4", tmp_path / "o", "compute.seed=1", threads=4, lock_wait_s=5)
+    command = video.command()
+    assert video.is_video and video.scene_dir == tmp_path / "o" / "scenes" / "take 1"  # ingested there first
+    assert command[command.index("--video") + 1] == str(tmp_path / "take 1.mp4")
+    assert command[command.index("--params") + 1] == "compute.seed=1 compute.threads=4"
+    assert command[command.index("--wait") + 1] == "5"
     from glimpse.batch.jobs import Attempt, SceneResult
 
     failed = SceneResult("gamma", "/x", "failed", None, [Attempt(1, 1, 2.0, ["01_sfm"], "/x.log")], 2.0, {}, "boom")

@@ -5,7 +5,6 @@ strictly with mkdocs (which also fails on broken links)."""
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import yaml

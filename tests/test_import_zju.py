@@ -139,6 +139,25 @@ def test_cameras_and_masks_agree_with_the_source(imported):
     assert "model_path" in str(scene.overrides["body"]) and scene.body_model == "smpl"
 
 
+class RunsCode:
+    def __reduce__(self):
+        return (print, ("this must not run",))
+
+
+def test_pickled_npy_files_are_read_without_running_code(tmp_path):
+    from glimpse.io.numpy_pickle import load_object_npy
+
+    np.save(tmp_path / "evil.npy", np.array({"cams": RunsCode()}, dtype=object), allow_pickle=True)
+    with pytest.raises(GlimpseError, match="refusing to unpickle builtins.print"):
+        load_object_npy(tmp_path / "evil.npy")
+    np.save(tmp_path / "plain.npy", np.arange(6.0).reshape(2, 3))
+    assert load_object_npy(tmp_path / "plain.npy").tolist() == [[0, 1, 2], [3, 4, 5]]
+    doc = {"K": [np.eye(3)], "ims": [{"ims": np.array(["a.jpg"])}]}
+    np.save(tmp_path / "dict.npy", doc, allow_pickle=True)
+    loaded = load_object_npy(tmp_path / "dict.npy")
+    assert np.array_equal(loaded["K"][0], np.eye(3)) and loaded["ims"][0]["ims"].tolist() == ["a.jpg"]
+
+
 def test_bad_sources_get_one_message(tmp_path, imported, capsys):
     with pytest.raises(GlimpseError, match="--body-model"):
         import_dataset("zju-mocap", imported[2], tmp_path / "s", ImportOptions())

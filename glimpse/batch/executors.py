@@ -20,11 +20,14 @@ Report = Callable[[SceneResult], None]
 def run_local(jobs: Sequence[SceneJob], workers: int, report: Report) -> list[SceneResult]:
     """``workers`` scenes at a time on this machine."""
     results: dict[int, SceneResult] = {}
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="glimpse-batch") as pool:
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="glimpse-batch")
+    try:
         futures = {pool.submit(run_scene, job): index for index, job in enumerate(jobs)}
         for future in as_completed(futures):
             results[futures[future]] = future.result()
             report(results[futures[future]])
+    finally:  # Ctrl-C: scenes not started yet never start; running ones stop with it (their children saw it)
+        pool.shutdown(wait=True, cancel_futures=True)
     return [results[index] for index in range(len(jobs))]
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import time
 from dataclasses import dataclass, field
@@ -14,13 +15,15 @@ from pathlib import Path
 
 import yaml
 
-from glimpse.errors import EXIT_BAD_INPUT, EXIT_USAGE
+from glimpse.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_USAGE
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
 STAGE_FOLDERS = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt",
                  "07_eval")
 LOG_TAIL_LINES = 15  # lines of a failed attempt's output kept in the result
 NOT_RETRIED = (EXIT_USAGE, EXIT_BAD_INPUT)  # a wrong command line or bad input fails the same way again
+STOPPED_BY_USER = (EXIT_INTERRUPTED, -signal.SIGINT)  # Ctrl-C: not retried (Slurm's SIGTERM/SIGUSR2 are)
+STATUSES = ("done", "failed", "bad input", "interrupted")
 HEADLINE_KEYS = ("humans_psnr_db", "humans_ssim", "humans_lpips_x100", "never_seen_psnr_db", "never_seen_lpips_x100",
                  "composite_psnr_db")
 
@@ -78,7 +81,7 @@ class Attempt:
 
 @dataclass
 class SceneResult:
-    """status: done | failed | bad input; run_dir: OUT/<scene name> (None when no scene came to be);
+    """status: done | failed | bad input | interrupted (Ctrl-C); run_dir: OUT/<scene name> (None when no scene came to be);
     headline: stage 07's numbers (HEADLINE_KEYS) when it finished; error: the end of the last failed
     attempt's output."""
 
@@ -149,8 +152,8 @@ def run_scene(job: SceneJob) -> SceneResult:
         if code == 0:
             status = "done"
             break
-        if code in NOT_RETRIED:
-            status = "bad input"
+        if code in NOT_RETRIED or code in STOPPED_BY_USER:
+            status = "bad input" if code in NOT_RETRIED else "interrupted"
             break
     run_dir = run_dir_of(job)
     error = "" if status == "done" else _tail(Path(attempts[-1].log), LOG_TAIL_LINES)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.batch.jobs import HEADLINE_KEYS, SceneResult
+from glimpse.batch.jobs import HEADLINE_KEYS, STATUSES, SceneResult
 from glimpse.io.staging import staged_file
 
 BATCH_FORMAT = "glimpse-batch/1"
@@ -31,7 +31,7 @@ def aggregate(results: list[SceneResult]) -> dict[str, dict[str, float]]:
 
 def summary_doc(results: list[SceneResult], executor: str) -> dict:
     return {"format": BATCH_FORMAT, "executor": executor,
-            "counts": {status: sum(r.status == status for r in results) for status in ("done", "failed", "bad input")},
+            "counts": {status: sum(r.status == status for r in results) for status in STATUSES},
             "scenes": [asdict(r) for r in results], "aggregate": aggregate(results)}
 
 

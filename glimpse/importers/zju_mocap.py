@@ -29,6 +29,7 @@ from glimpse.body.model_file import load_body_model_file
 from glimpse.errors import GlimpseError
 from glimpse.importers.common import ImportOptions, camera_name, smpl_model_file, undistorted_view
 from glimpse.io.images import read_rgb
+from glimpse.io.numpy_pickle import load_object_npy
 from glimpse.io.progress import progress
 from glimpse.scene.model import CameraPose
 from glimpse.scene.writer import SceneWriter
@@ -60,14 +61,14 @@ def read_annots(folder: Path) -> tuple[dict[str, np.ndarray], list[list[str]]]:
     """(cameras: K [C, 3, 3], D [C, 5], R [C, 3, 3], t [C, 3] metres; per frame, the C image paths)."""
     path = folder / "annots.npy"
     try:
-        annots = np.load(path, allow_pickle=True).item()
+        annots = load_object_npy(path)
         cams = annots["cams"]
         cameras = {"K": np.asarray(cams["K"], np.float64).reshape(-1, 3, 3),
                    "D": np.asarray(cams["D"], np.float64).reshape(len(cams["K"]), -1),
                    "R": np.asarray(cams["R"], np.float64).reshape(-1, 3, 3),
                    "t": np.asarray(cams["T"], np.float64).reshape(-1, 3) / MILLIMETRES_PER_METRE}
         images = [[str(p) for p in entry["ims"]] for entry in annots["ims"]]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (KeyError, TypeError, AttributeError, IndexError) as exc:
         raise GlimpseError(f"{path}: not ZJU-MoCap's annots.npy (a dict with cams K, D, R, T and ims): {exc}") from None
     count = len(cameras["K"])
     if not all(len(cameras[key]) == count for key in cameras) or any(len(paths) != count for paths in images):
@@ -196,10 +197,10 @@ def read_bodies(folder: Path, image_paths: list[str]) -> dict[str, np.ndarray]:
     for image_path in image_paths:
         path = params_dir / f"{params_index(image_path)}.npy"
         try:
-            entry = np.load(path, allow_pickle=True).item()
+            entry = load_object_npy(path)
             for key in rows:
                 rows[key].append(np.asarray(entry[key], np.float64).reshape(-1))
-        except (OSError, ValueError, KeyError, AttributeError) as exc:
+        except (ValueError, KeyError, TypeError, IndexError) as exc:
             raise GlimpseError(f"{path}: not an EasyMocap SMPL file (poses, Rh, Th, shapes): {exc}") from None
     params = {key: np.stack(values) for key, values in rows.items()}
     if np.abs(params["shapes"] - params["shapes"][0]).max() > 1e-6:

