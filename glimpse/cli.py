@@ -4,7 +4,7 @@
                                          masks), a preview video and a tracks report (docs/ingest.md); SCENE_DIR
                                          defaults to OUT/scenes/<video name>
   glimpse import DATASET SOURCE SCENE_DIR [--sequence S] [--cameras IN,HELD,...] [--frames A:B[:STEP]]
-                                         a dataset's sequence -> a scene: zju-mocap (docs/datasets.md)
+                                         a dataset's sequence -> a scene: zju-mocap, panoptic, emdb (docs/datasets.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
@@ -112,19 +112,21 @@ def main(argv: list[str] | None = None) -> int:
     p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
     p_import = command("import", "a dataset's sequence -> a glimpse-scene/1 folder (docs/datasets.md)")
-    p_import.add_argument("dataset", help="zju-mocap")
+    p_import.add_argument("dataset", help="zju-mocap | panoptic | emdb")
     p_import.add_argument("source", type=Path, help="the dataset's folder (with --sequence) or one sequence's")
     p_import.add_argument("scene", type=Path, help="the scene folder to write (replaced when the import succeeds)")
-    p_import.add_argument("--sequence", default=None, help="the sequence, e.g. 377 (ZJU-MoCap)")
+    p_import.add_argument("--sequence", default=None, help="the sequence, e.g. 377 (ZJU-MoCap), 160422_ultimatum1 "
+                                                           "(Panoptic), P0/09_outdoor_walk (EMDB)")
     p_import.add_argument("--cameras", default=None, help="the input camera, then held-out ones, comma-separated "
                                                           "(indices from 0, or the dataset's names; default: the "
                                                           "protocol docs/datasets.md gives)")
     p_import.add_argument("--frames", default=None, help="A:B[:STEP] of the sequence's frames (B excluded; "
-                                                         "default: all)")
+                                                         "Panoptic: HD frame numbers; default: all)")
     p_import.add_argument("--eval-every", type=int, default=30, help="held-out images every this many imported "
                                                                      "frames (default 30, HumanNeRF's protocol)")
-    p_import.add_argument("--body-model", type=Path, default=None, help="the SMPL model file the dataset's bodies "
-                                                                        "belong to (e.g. SMPL_NEUTRAL.pkl)")
+    p_import.add_argument("--body-model", action="append", default=[], metavar="[GENDER=]PATH",
+                          help="an SMPL model file the dataset's bodies belong to: PATH (neutral) or male=PATH, "
+                               "female=PATH; repeatable")
     p_import.add_argument("--fps", type=float, default=None, help="frames per second, where the dataset's files "
                                                                   "do not say")
     p_val = command("validate", "check a scene folder against glimpse-scene/1")
@@ -236,13 +238,13 @@ def _dispatch(args: argparse.Namespace) -> int:
         return 0
     if args.command == "import":
         from glimpse.importers import import_dataset
-        from glimpse.importers.common import ImportOptions, parse_span
+        from glimpse.importers.common import ImportOptions, parse_body_models, parse_span
 
         if args.eval_every < 1:
             raise GlimpseError(f"--eval-every {args.eval_every}: must be at least 1")
         options = ImportOptions(args.sequence, tuple(args.cameras.split(",")) if args.cameras else None,
                                 parse_span(args.frames) if args.frames else None, args.eval_every,
-                                args.body_model, args.fps)
+                                parse_body_models(args.body_model), args.fps)
         scene = import_dataset(args.dataset, args.source, args.scene, options)
         print(f"imported {args.dataset} into {scene} (check it: glimpse validate {scene}; run it: "
               f"glimpse run --scene {scene})")

@@ -88,7 +88,7 @@ def imported(tmp_path_factory):
     model = write_random_smpl_pkl(root / "SMPL_NEUTRAL.pkl", seed=3, chumpy_style=False)
     scene = import_dataset("zju-mocap", root / "source", root / "scene",
                            ImportOptions(sequence="377", cameras=("0", "2"), frames=parse_span("1:5"), eval_every=2,
-                                         body_model=model))
+                                         body_models={"neutral": model}))
     return truth, model, root / "source" / "CoreView_377", load_scene(scene)
 
 
@@ -162,10 +162,10 @@ def test_bad_sources_get_one_message(tmp_path, imported, capsys):
     with pytest.raises(GlimpseError, match="--body-model"):
         import_dataset("zju-mocap", imported[2], tmp_path / "s", ImportOptions())
     with pytest.raises(GlimpseError, match="no annots.npy"):
-        import_dataset("zju-mocap", tmp_path, tmp_path / "s", ImportOptions(body_model=imported[1]))
+        import_dataset("zju-mocap", tmp_path, tmp_path / "s", ImportOptions(body_models={"neutral": imported[1]}))
     with pytest.raises(GlimpseError, match="not a camera of this sequence"):
         import_dataset("zju-mocap", imported[2], tmp_path / "s", ImportOptions(cameras=("7",),
-                                                                                body_model=imported[1]))
+                                                                                body_models={"neutral": imported[1]}))
     assert cli(["import", "hi5d", str(tmp_path), str(tmp_path / "s")]) == EXIT_BAD_INPUT
-    assert "Glimpse imports zju-mocap" in capsys.readouterr().err
+    assert "Glimpse imports emdb, panoptic, zju-mocap" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()

@@ -388,6 +388,26 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
     assert "INPUT view" in read_json(out / "metrics.json")["views"]
 
 
+def test_held_out_views_without_masks_are_scored_on_the_full_frame_only(tiny, tmp_path):
+    import shutil
+
+    scene, run_dir = tiny
+    unmasked = tmp_path / "scene"
+    shutil.copytree(scene, unmasked)
+    for masks in unmasked.glob("eval/*/masks"):
+        shutil.rmtree(masks)
+    shutil.copytree(run_dir, tmp_path / "out" / run_dir.name, ignore=shutil.ignore_patterns("07_eval", ".lock"))
+    params = SHORT + " 07_eval.renders.enabled=false 07_eval.speed.enabled=false"
+    before = read_json(run("07_eval", scene, tmp_path / "out", params) / "metrics.json")["tables"]["composite"]["rows"][0]
+    out = run("07_eval", unmasked, tmp_path / "out", params)
+    metrics = read_json(out / "metrics.json")
+    assert set(metrics["tables"]) == {"composite"} and "no ground-truth masks" in metrics["views"]
+    assert metrics["tables"]["composite"]["rows"][0]["psnr"] == pytest.approx(before["psnr"], abs=1e-4)
+    summary = read_json(out / "manifest.json")["summary"]
+    assert "humans_psnr_db" not in summary and summary["composite_psnr_db"] == pytest.approx(before["psnr"], abs=1e-3)
+    assert "full frame: PSNR" in (tmp_path / "out" / run_dir.name / "report.html").read_text()
+
+
 def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_path, capsys):
     import pycolmap
     import trimesh

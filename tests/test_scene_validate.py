@@ -452,8 +452,6 @@ CASES = [
                  "eval/cam1/", "at least one image", "no images", id="eval-no-images"),
     pytest.param(remove("eval/cam1/masks/000001.png"), "eval/cam1/masks/",
                  "must have a union mask eval/cam1/masks/<id>.png", "000001", id="eval-missing-mask"),
-    pytest.param(remove("eval/cam1/masks"), "eval/cam1/masks/", "must have a union mask eval/cam1/masks/<id>.png",
-                 "no masks/ folder", id="eval-no-masks"),
     pytest.param(image("eval/cam1/masks/000005.png", mask(EVAL_WIDTH, EVAL_HEIGHT)), "eval/cam1/masks/000005.png",
                  "a union mask must have an image with the same frame id", "000005", id="eval-extra-mask"),
     pytest.param(text("eval/cam1/masks/notes.txt"), "eval/cam1/masks/notes.txt", "masks/ may only hold union masks",
@@ -514,6 +512,7 @@ VALID_VARIANTS = [
     pytest.param(remove("humans/p1/masks", "humans/p1/reference"), id="person-npz-only"),
     pytest.param(image("humans/p0/reference/IMG_0001.JPG", rgb(30, 40)), id="reference-any-size-upper-suffix"),
     pytest.param(remove("eval/cam1/masks/p0"), id="eval-no-person-masks"),
+    pytest.param(remove("eval/cam1/masks"), id="eval-no-masks-full-frame-only"),
     pytest.param(npz_set("humans/p0/smpl.npz", extra=np.zeros(2)), id="smpl-extra-key"),
     pytest.param(yaml_set(fps=29.97, name="Scene-1.v2"), id="float-fps"),
 ]

@@ -1,5 +1,6 @@
 """Keypoints of the body in the layouts detectors and ControlNet use: COCO-17,
-OpenPose BODY-25 and OpenPose-18, and COCO-17 as annotators mark it on the skin.
+OpenPose BODY-25 and OpenPose-18, COCO-17 as annotators mark it on the skin, and
+CMU Panoptic's 19 3D keypoints ("coco19").
 
 A keypoint is either a combination of the body's posed joints (shoulders,
 elbows, wrists, hips, knees, ankles, neck, mid-hip) or a surface landmark: a
@@ -68,6 +69,14 @@ LAYOUTS: dict[str, tuple[tuple[str, Source], ...]] = {
         ("left_big_toe", "left_big_toe"), ("left_small_toe", "left_small_toe"), ("left_heel", "left_heel"),
         ("right_big_toe", "right_big_toe"), ("right_small_toe", "right_small_toe"), ("right_heel", "right_heel"),
     ),
+    # CMU Panoptic's 3D body keypoints (panoptic-toolbox's README, "coco19"): not OpenPose's order
+    "coco19": (
+        ("neck", NECK), ("nose", "nose"), ("mid_hip", MID_HIP), ("left_shoulder", L_SHOULDER),
+        ("left_elbow", L_ELBOW), ("left_wrist", L_WRIST), ("left_hip", L_HIP), ("left_knee", L_KNEE),
+        ("left_ankle", L_ANKLE), ("right_shoulder", R_SHOULDER), ("right_elbow", R_ELBOW), ("right_wrist", R_WRIST),
+        ("right_hip", R_HIP), ("right_knee", R_KNEE), ("right_ankle", R_ANKLE), ("left_eye", "left_eye"),
+        ("left_ear", "left_ear"), ("right_eye", "right_eye"), ("right_ear", "right_ear"),
+    ),
     "openpose18": (
         ("nose", "nose"), ("neck", NECK), ("right_shoulder", R_SHOULDER), ("right_elbow", R_ELBOW),
         ("right_wrist", R_WRIST), ("left_shoulder", L_SHOULDER), ("left_elbow", L_ELBOW), ("left_wrist", L_WRIST),
@@ -123,7 +132,8 @@ def body_landmarks(data: BodyModelData) -> dict[str, tuple[np.ndarray, np.ndarra
 
 
 def keypoint_map(layout: str, data: BodyModelData) -> KeypointMap:
-    """The keypoint map of ``layout`` (coco17 | coco17_skin | openpose25 | openpose18) for a body model file."""
+    """The keypoint map of ``layout`` (coco17 | coco17_skin | coco19 | openpose25 | openpose18) for a body model
+    file."""
     if layout not in LAYOUTS:
         raise ValueError(f"unknown keypoint layout {layout!r}; known: {', '.join(LAYOUTS)}")
     return _entries_map(layout, LAYOUTS[layout], data)

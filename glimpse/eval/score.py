@@ -83,6 +83,10 @@ def score_views(view_set: ViewSet, people: list[PersonGaussians], background: Ga
     for view in progress(view_set.views, desc="07_eval scoring", unit="view"):
         image, union, masks = view.read()
         target = torch.as_tensor(image, device=device).float() / 255.0
+        if union is None:  # no ground-truth masks for this view: the full frame only
+            full = render_view(view, people, background, render, device)
+            composite.append(frame_metrics(view.name, full, target, lpips_module))
+            continue
         union_t = torch.as_tensor(union, device=device)
         masked_target = target * union_t[..., None]
         view_bodies = bodies.in_view(view)
@@ -118,7 +122,7 @@ def score_views(view_set: ViewSet, people: list[PersonGaussians], background: Ga
                                    "views without such pixels are skipped", BLACK, where, net),
         "composite": EvalProtocol("none: background and people against the whole frame", None, where, net),
     }
-    rows = {"humans": [summarize(label, frames) for label, frames in humans.items()],
+    rows = {"humans": [summarize(label, frames) for label, frames in humans.items() if frames],
             "people": [summarize(pid, frames) for pid, frames in per_person.items() if frames],
             "never_seen": [summarize(label, frames) for label, frames in never_seen.items() if frames],
             "composite": [summarize("background + humans", composite)]}
@@ -142,10 +146,14 @@ def write_tables(tables: EvalTables, prior: str, source: str, out: Path) -> dict
 
 
 def headline(tables: EvalTables) -> dict[str, float]:
-    """The humans-only, never-seen and composite means of the render, for the manifest and the demo's printout."""
-    h, c = tables.rows["humans"][0], tables.rows["composite"][0]
-    values = {"humans_psnr_db": round(h.psnr, 3), "humans_ssim": round(h.ssim, 4),
-              "humans_lpips_x100": round(h.lpips, 3), "composite_psnr_db": round(c.psnr, 3)}
+    """The humans-only, never-seen and composite means of the render, for the manifest and the demo's printout
+    (the humans-only ones only where some view had ground-truth masks)."""
+    c = tables.rows["composite"][0]
+    values = {"composite_psnr_db": round(c.psnr, 3)}
+    if tables.rows["humans"]:
+        h = tables.rows["humans"][0]
+        values.update(humans_psnr_db=round(h.psnr, 3), humans_ssim=round(h.ssim, 4),
+                      humans_lpips_x100=round(h.lpips, 3))
     if tables.rows["never_seen"]:
         n = tables.rows["never_seen"][0]
         values.update(never_seen_psnr_db=round(n.psnr, 3), never_seen_lpips_x100=round(n.lpips, 3))

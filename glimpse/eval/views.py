@@ -17,19 +17,20 @@ from glimpse.scene.model import Scene
 @dataclass(frozen=True)
 class ScoredView:
     """One view to score: ``name`` (camera/frame), the frame id whose poses are rendered, the camera (with
-    its image size), the ground truth image and the union human mask, and per-person masks where known."""
+    its image size), the ground truth image and the union human mask (None: a held-out camera without masks,
+    scored on the full frame only), and per-person masks where known."""
 
     name: str
     frame_id: int
     camera: PinholeCamera
     image: Path
-    union_mask: Path
+    union_mask: Path | None
     person_masks: dict[str, Path]
 
-    def read(self) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """(image [H, W, 3] uint8, union [H, W] bool, pid -> mask [H, W] bool)."""
-        return (read_rgb(self.image), read_mask(self.union_mask),
-                {pid: read_mask(path) for pid, path in self.person_masks.items()})
+    def read(self) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]]:
+        """(image [H, W, 3] uint8, union [H, W] bool or None, pid -> mask [H, W] bool)."""
+        union = read_mask(self.union_mask) if self.union_mask is not None else None
+        return read_rgb(self.image), union, {pid: read_mask(path) for pid, path in self.person_masks.items()}
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ def heldout_views(scene: Scene, world_is_scene_frame: bool) -> list[ScoredView]:
             camera = cam.camera_at(fid)
             masks = {pid: frames[fid] for pid, frames in cam.person_masks.items() if fid in frames}
             views.append(ScoredView(f"{name}/{frame_name(fid)}", fid, camera, cam.images[fid],
-                                    cam.union_masks[fid], masks))
+                                    cam.union_masks.get(fid), masks))
     return views
 
 
@@ -72,8 +73,12 @@ def choose_views(config: EvalConfig, scene: Scene, world_is_scene_frame: bool, c
     held = heldout_views(scene, world_is_scene_frame) if config.heldout == "auto" else []
     if held:
         cams = ", ".join(sorted(scene.eval_cameras))
+        unmasked = sorted(name for name, cam in scene.eval_cameras.items() if not cam.union_masks)
+        masks = ("ground-truth masks from eval/" + (f" (none for {', '.join(unmasked)}: scored on the full frame "
+                                                     "only)" if unmasked else "")) if len(unmasked) < len(
+            scene.eval_cameras) else "no ground-truth masks: full-frame metrics only"
         return ViewSet("held-out", f"held-out cameras {cams} (eval/), every frame with a ground-truth image; "
-                                   f"ground-truth masks from eval/", held)
+                                   f"{masks}", held)
     why = ("heldout: input" if config.heldout == "input" else
            "the scene has no eval/ cameras" if not scene.eval_cameras else
            "eval/ cameras are in the scene's frame, but stage 01 rebuilt the world by structure from motion")

@@ -3,7 +3,7 @@ undistorted to pinhole images, and the body model a dataset's SMPL parameters ne
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -17,14 +17,15 @@ from glimpse.errors import GlimpseError
 class ImportOptions:
     """sequence: the dataset's sequence name (None: SOURCE is the sequence folder itself); cameras: the input
     camera first, then the held-out ones (None: the dataset's protocol); frames: a span of the sequence's frames
-    (None: all); eval_every: held-out images every this many imported frames; body_model: a body model file
-    for datasets whose bodies are SMPL parameters; fps: frames per second when the dataset does not say."""
+    (None: all); eval_every: held-out images every this many imported frames; body_models: SMPL model files by
+    gender (neutral, male, female) for datasets whose bodies are SMPL parameters; fps: frames per second when
+    the dataset does not say."""
 
     sequence: str | None = None
     cameras: tuple[str, ...] | None = None
     frames: slice | None = None
     eval_every: int = 30
-    body_model: Path | None = None
+    body_models: dict[str, Path] = field(default_factory=dict)
     fps: float | None = None
 
 
@@ -43,13 +44,32 @@ def parse_span(text: str) -> slice:
     return slice(*values)
 
 
-def smpl_model_file(options: ImportOptions, dataset: str) -> Path:
-    """The SMPL-format model file the dataset's parameters belong to (``--body-model``); refused when missing or
-    when it is not an SMPL model (the free body's parameters are another model's)."""
-    path = options.body_model
+GENDERS = ("neutral", "male", "female")
+MODEL_FILE_NAMES = {"neutral": "SMPL_NEUTRAL.pkl", "male": "SMPL_MALE.pkl", "female": "SMPL_FEMALE.pkl"}
+
+
+def parse_body_models(values: list[str]) -> dict[str, Path]:
+    """``--body-model [GENDER=]PATH`` values (a bare path is the neutral model) -> gender -> path."""
+    models = {}
+    for value in values:
+        gender, sep, path = value.partition("=")
+        if not sep:
+            gender, path = "neutral", value
+        if gender not in GENDERS:
+            raise GlimpseError(f"--body-model {value}: give PATH or GENDER=PATH with GENDER one of "
+                               f"{', '.join(GENDERS)}")
+        models[gender] = Path(path)
+    return models
+
+
+def smpl_model_file(options: ImportOptions, dataset: str, gender: str = "neutral", who: str = "its bodies") -> Path:
+    """The SMPL-format model file of ``gender`` that the dataset's parameters belong to (``--body-model``);
+    refused when missing or when it is not an SMPL model (the free body's parameters are another model's)."""
+    path = options.body_models.get(gender)
     if path is None:
-        raise GlimpseError(f"{dataset}: its bodies are SMPL parameters; give the SMPL model they belong to with "
-                           "--body-model /path/to/SMPL_NEUTRAL.pkl (SMPL's licence forbids shipping it)")
+        option = "" if gender == "neutral" else f"{gender}="
+        raise GlimpseError(f"{dataset}: {who} are parameters of SMPL's {gender} model; give it with --body-model "
+                           f"{option}/path/to/{MODEL_FILE_NAMES[gender]} (SMPL's licence forbids shipping it)")
     path = Path(path).expanduser().resolve()
     if not path.is_file():
         raise GlimpseError(f"--body-model {path}: no such file")
@@ -59,12 +79,12 @@ def smpl_model_file(options: ImportOptions, dataset: str) -> Path:
     return path
 
 
-def undistorted_view(K: np.ndarray, dist: np.ndarray | None, rgb: np.ndarray, mask: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def undistorted_view(K: np.ndarray, dist: np.ndarray | None, rgb: np.ndarray, mask: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray | None]:
     """A held-out view as the scene format wants it, pinhole with the same K: (rgb [H, W, 3] uint8, mask [H, W]
-    bool) undistorted."""
+    bool or None) undistorted."""
     undistorter = Undistorter(K, dist, rgb.shape[1], rgb.shape[0])
-    return undistorter.image(rgb), undistorter.mask(mask)
+    return undistorter.image(rgb), (undistorter.mask(mask) if mask is not None else None)
 
 
 def camera_name(text: str) -> str:

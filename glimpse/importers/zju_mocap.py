@@ -14,7 +14,7 @@ The source, one sequence folder (``CoreView_377/``; read from Neural Body's and 
 EasyMocap places a body as V = R(Rh) · SMPL(poses, shapes) + Th, turning about the model's origin (its
 ``poses[:3]`` is zero); the scene format's smpl.npz turns about the pelvis (smplx's convention), so
 global_orient = Rh ∘ poses[:3] and transl = Th + R(Rh) j0 - j0, with j0 the shaped rest pelvis (which needs
-the SMPL model: ``--body-model``). One person, SMPL neutral.
+the SMPL model: ``--body-model``, the neutral one). One person.
 """
 
 from __future__ import annotations

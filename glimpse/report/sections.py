@@ -52,7 +52,7 @@ def headline(record: RunRecord) -> str:
     if not s:
         return '<p class="headline">No metrics yet: stage 07_eval has not run.</p>'
     parts = [f"humans only (held-out): PSNR {s['humans_psnr_db']:.2f} dB, SSIM {s['humans_ssim']:.4f}, "
-             f"LPIPS×100 {s['humans_lpips_x100']:.2f}"]
+             f"LPIPS×100 {s['humans_lpips_x100']:.2f}"] if "humans_psnr_db" in s else []
     if "never_seen_psnr_db" in s:
         parts.append(f"never-seen regions: PSNR {s['never_seen_psnr_db']:.2f} dB, "
                      f"LPIPS×100 {s['never_seen_lpips_x100']:.2f}")

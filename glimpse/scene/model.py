@@ -34,7 +34,7 @@ SCENE_FORMAT_VERSION = "glimpse-scene/1"
 CAMERAS_FORMAT = "glimpse-cameras/1"
 EVAL_CAMERAS_FORMAT = "glimpse-eval-cameras/1"
 #: keypoint layout name -> number of joints J
-KEYPOINT_LAYOUTS: dict[str, int] = {"coco17": 17, "openpose25": 25}
+KEYPOINT_LAYOUTS: dict[str, int] = {"coco17": 17, "openpose25": 25, "coco19": 19}
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,8 @@ class EvalCamera:
     K, R, t: (3, 3), (3, 3), (3,) static intrinsics and world-to-camera pose.
     poses:   optional per-frame poses (frame id -> pose); empty = static.
     images:  frame id -> ground-truth image.
-    union_masks:  frame id -> mask of all humans (same ids as ``images``).
+    union_masks:  frame id -> mask of all humans (same ids as ``images``), or empty: a camera without masks
+                  (scored on the full frame only).
     person_masks: pid -> frame id -> mask of that person (optional, may be empty).
     """
 

@@ -140,9 +140,7 @@ def check_eval_camera_folder(facts: SceneFacts, cam_dir: Path, size: Size) -> No
         if info is not None and size is not None and (info.width, info.height) != size:
             facts.add(facts.rel(path), f"an eval image must have its camera's size {size[0]}x{size[1]} "
                                        f"(eval/cameras.json)", info.size_text)
-    if masks_dir is None:
-        if images:
-            facts.add(f"eval/{cam}/masks/", _union_rule(cam), "no masks/ folder")
+    if masks_dir is None:  # masks are optional: without them the camera is scored on the full frame only
         return
     check_eval_masks(facts, masks_dir, images, size)
 

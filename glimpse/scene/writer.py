@@ -141,11 +141,13 @@ class SceneWriter:
             doc["frames"] = {frame_name(fid): _pose(pose) for fid, pose in sorted(poses.items())}
         self.eval_cameras[name] = doc
 
-    def eval_view(self, camera: str, frame_id: int, rgb: np.ndarray, union_mask: np.ndarray,
+    def eval_view(self, camera: str, frame_id: int, rgb: np.ndarray, union_mask: np.ndarray | None = None,
                   person_masks: dict[str, np.ndarray] | None = None) -> None:
-        """eval/<camera>/<id>.png, its union mask of every person and, optionally, each person's mask."""
+        """eval/<camera>/<id>.png, its union mask of every person (None: a camera without masks, scored on the
+        full frame only; then give none for its other views either) and, optionally, each person's mask."""
         self._png(f"eval/{camera}/{frame_name(frame_id)}.png", rgb)
-        self._png(f"eval/{camera}/masks/{frame_name(frame_id)}.png", _mask_png(union_mask))
+        if union_mask is not None:
+            self._png(f"eval/{camera}/masks/{frame_name(frame_id)}.png", _mask_png(union_mask))
         for pid, mask in (person_masks or {}).items():
             self._png(f"eval/{camera}/masks/{pid}/{frame_name(frame_id)}.png", _mask_png(mask))
 
