@@ -398,7 +398,8 @@ def test_held_out_views_without_masks_are_scored_on_the_full_frame_only(tiny, tm
         shutil.rmtree(masks)
     shutil.copytree(run_dir, tmp_path / "out" / run_dir.name, ignore=shutil.ignore_patterns("07_eval", ".lock"))
     params = SHORT + " 07_eval.renders.enabled=false 07_eval.speed.enabled=false"
-    before = read_json(run("07_eval", scene, tmp_path / "out", params) / "metrics.json")["tables"]["composite"]["rows"][0]
+    masked = read_json(run("07_eval", scene, tmp_path / "out", params) / "metrics.json")
+    before = masked["tables"]["composite"]["rows"][0]
     out = run("07_eval", unmasked, tmp_path / "out", params)
     metrics = read_json(out / "metrics.json")
     assert set(metrics["tables"]) == {"composite"} and "no ground-truth masks" in metrics["views"]
