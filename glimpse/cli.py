@@ -4,7 +4,8 @@
                                          masks), a preview video and a tracks report (docs/ingest.md); SCENE_DIR
                                          defaults to OUT/scenes/<video name>
   glimpse import DATASET SOURCE SCENE_DIR [--sequence S] [--cameras IN,HELD,...] [--frames A:B[:STEP]]
-                                         a dataset's sequence -> a scene: zju-mocap, panoptic, emdb (docs/datasets.md)
+                                         a dataset's sequence -> a scene: zju-mocap, panoptic, emdb, hi4d
+                                         (docs/datasets.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
@@ -112,16 +113,17 @@ def main(argv: list[str] | None = None) -> int:
     p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
     p_import = command("import", "a dataset's sequence -> a glimpse-scene/1 folder (docs/datasets.md)")
-    p_import.add_argument("dataset", help="zju-mocap | panoptic | emdb")
+    p_import.add_argument("dataset", help="zju-mocap | panoptic | emdb | hi4d")
     p_import.add_argument("source", type=Path, help="the dataset's folder (with --sequence) or one sequence's")
     p_import.add_argument("scene", type=Path, help="the scene folder to write (replaced when the import succeeds)")
-    p_import.add_argument("--sequence", default=None, help="the sequence, e.g. 377 (ZJU-MoCap), 160422_ultimatum1 "
-                                                           "(Panoptic), P0/09_outdoor_walk (EMDB)")
+    p_import.add_argument("--sequence", default=None,
+                          help="the sequence, e.g. 377 (ZJU-MoCap), 160422_ultimatum1 (Panoptic), P0/09_outdoor_walk "
+                               "(EMDB), pair00/dance00 (Hi4D)")
     p_import.add_argument("--cameras", default=None, help="the input camera, then held-out ones, comma-separated "
                                                           "(indices from 0, or the dataset's names; default: the "
                                                           "protocol docs/datasets.md gives)")
     p_import.add_argument("--frames", default=None, help="A:B[:STEP] of the sequence's frames (B excluded; "
-                                                         "Panoptic: HD frame numbers; default: all)")
+                                                         "Panoptic, Hi4D: their frame numbers; default: all)")
     p_import.add_argument("--eval-every", type=int, default=30, help="held-out images every this many imported "
                                                                      "frames (default 30, HumanNeRF's protocol)")
     p_import.add_argument("--body-model", action="append", default=[], metavar="[GENDER=]PATH",

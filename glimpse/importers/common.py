@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from glimpse.body.config import peek_body_model_kind
 from glimpse.cameras.undistort import Undistorter
@@ -85,6 +86,16 @@ def undistorted_view(K: np.ndarray, dist: np.ndarray | None, rgb: np.ndarray, ma
     bool or None) undistorted."""
     undistorter = Undistorter(K, dist, rgb.shape[1], rgb.shape[0])
     return undistorter.image(rgb), (undistorter.mask(mask) if mask is not None else None)
+
+
+def nonzero_mask(path: Path) -> np.ndarray | None:
+    """[H, W] bool of a dataset's mask whose person pixels are any non-zero value (0/1, 0/255, part labels, a
+    palette index, or any channel of a colour image); None when the file is absent."""
+    if not path.is_file():
+        return None
+    with Image.open(path) as image:
+        values = np.asarray(image)
+    return values.any(axis=-1) if values.ndim == 3 else values != 0
 
 
 def camera_name(text: str) -> str:

@@ -22,12 +22,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from glimpse.body.model_file import load_body_model_file
 from glimpse.errors import GlimpseError
-from glimpse.importers.common import ImportOptions, camera_name, smpl_model_file, undistorted_view
+from glimpse.importers.common import ImportOptions, camera_name, nonzero_mask, smpl_model_file, undistorted_view
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npy
 from glimpse.io.progress import progress
@@ -91,21 +90,11 @@ def params_index(image_path: str) -> int:
 
 def person_mask(folder: Path, image_path: str) -> np.ndarray:
     """[H, W] bool: the union of mask/ and mask_cihp/ for one image (either may be absent, not both)."""
-    found = [read_mask_any(folder / name / Path(image_path).with_suffix(".png")) for name in MASK_FOLDERS]
+    found = [nonzero_mask(folder / name / Path(image_path).with_suffix(".png")) for name in MASK_FOLDERS]
     found = [mask for mask in found if mask is not None]
     if not found:
         raise GlimpseError(f"{folder}: no mask for {image_path} in {' or '.join(MASK_FOLDERS)}/")
     return np.logical_or.reduce(found)
-
-
-def read_mask_any(path: Path) -> np.ndarray | None:
-    """[H, W] bool of a mask whose person pixels are any non-zero value (0/1, 0/255, part labels, a palette
-    index, or any channel of a colour image); None when the file is absent."""
-    if not path.is_file():
-        return None
-    with Image.open(path) as image:
-        values = np.asarray(image)
-    return values.any(axis=-1) if values.ndim == 3 else values != 0
 
 
 def rest_pelvis(model_file: Path, betas: np.ndarray) -> np.ndarray:

@@ -5,7 +5,9 @@ annots.npy), which ``np.load`` reads only by allowing unrestricted pickle."""
 
 from __future__ import annotations
 
+import io
 import pickle
+import zipfile
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -38,19 +40,39 @@ def load_numpy_pickle(handle: BinaryIO, where: str) -> Any:
     return NumpyOnlyUnpickler(handle, where).load()
 
 
+def read_npy(handle: BinaryIO, where: str) -> Any:
+    """The array stored in an open .npy stream (an object array through NumpyOnlyUnpickler); a 0-d object
+    array gives its object (a dict, usually)."""
+    version = npy_format.read_magic(handle)
+    if version not in HEADER_READERS:
+        raise ValueError(f"npy format version {version} is not read here")
+    shape, fortran_order, dtype = HEADER_READERS[version](handle)
+    if dtype.hasobject:
+        array = NumpyOnlyUnpickler(handle, where, encoding="latin1").load()
+    else:
+        data = np.frombuffer(handle.read(), dtype=dtype, count=int(np.prod(shape, dtype=np.int64)))
+        array = data.reshape(shape[::-1]).T if fortran_order else data.reshape(shape)
+    return array.item() if isinstance(array, np.ndarray) and array.dtype.hasobject and array.shape == () else array
+
+
 def load_object_npy(path: Path) -> Any:
-    """What ``np.save`` stored in ``path``: a 0-d object array gives its object (a dict, usually), any other
-    array itself. Raises GlimpseError for a file that is not a .npy or holds other classes."""
+    """What ``np.save`` stored in ``path`` (read_npy). Raises GlimpseError for a file that is not a .npy or holds
+    other classes than numpy's."""
     try:
         with open(path, "rb") as handle:
-            version = npy_format.read_magic(handle)
-            if version not in HEADER_READERS:
-                raise ValueError(f"npy format version {version} is not read here")
-            _, _, dtype = HEADER_READERS[version](handle)
-            if dtype.hasobject:
-                array = NumpyOnlyUnpickler(handle, str(path), encoding="latin1").load()
-        if not dtype.hasobject:
-            array = np.load(path)
+            return read_npy(handle, str(path))
     except (OSError, ValueError, pickle.UnpicklingError, EOFError) as exc:
         raise GlimpseError(f"{path}: not a readable .npy of numpy arrays ({exc})") from None
-    return array.item() if isinstance(array, np.ndarray) and array.dtype.hasobject and array.shape == () else array
+
+
+def load_object_npz(path: Path) -> dict[str, Any]:
+    """Every entry of an .npz (``np.savez``), object entries included, read as read_npy does."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            entries = {}
+            for name in archive.namelist():
+                with archive.open(name) as member:
+                    entries[name.removesuffix(".npy")] = read_npy(io.BytesIO(member.read()), f"{path}:{name}")
+            return entries
+    except (OSError, ValueError, pickle.UnpicklingError, EOFError, zipfile.BadZipFile) as exc:
+        raise GlimpseError(f"{path}: not a readable .npz of numpy arrays ({exc})") from None
