@@ -74,9 +74,12 @@ def choose_views(config: EvalConfig, scene: Scene, world_is_scene_frame: bool, c
     if held:
         cams = ", ".join(sorted(scene.eval_cameras))
         unmasked = sorted(name for name, cam in scene.eval_cameras.items() if not cam.union_masks)
-        masks = ("ground-truth masks from eval/" + (f" (none for {', '.join(unmasked)}: scored on the full frame "
-                                                     "only)" if unmasked else "")) if len(unmasked) < len(
-            scene.eval_cameras) else "no ground-truth masks: full-frame metrics only"
+        if len(unmasked) == len(scene.eval_cameras):
+            masks = "no ground-truth masks: full-frame metrics only"
+        elif unmasked:
+            masks = f"ground-truth masks from eval/ (none for {', '.join(unmasked)}: scored on the full frame only)"
+        else:
+            masks = "ground-truth masks from eval/"
         return ViewSet("held-out", f"held-out cameras {cams} (eval/), every frame with a ground-truth image; "
                                    f"{masks}", held)
     why = ("heldout: input" if config.heldout == "input" else

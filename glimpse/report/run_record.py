@@ -19,8 +19,7 @@ class RunRecord:
     """A run folder and the JSON its stages wrote.
 
     manifests: stage -> its manifest.json (only stages that finished).
-    reports:   stage -> its report-like JSON (01 report.json, 03 masks.json, 04/06 report.json, 07 metrics.json
-               and speed.json under "07_eval" and "07_speed").
+    reports:   stage -> its report-like JSON (01 report.json, 03 masks.json, 04/06 report.json, 07 metrics.json).
     failed_logs: stage -> the log of its last failed attempt (OUT/<scene>/<stage>.failed.log.txt).
     """
 
@@ -42,18 +41,10 @@ class RunRecord:
     def summary(self, stage: str) -> dict[str, Any]:
         return self.manifests.get(stage, {}).get("summary", {})
 
-    def scene_root(self) -> Path | None:
-        """The scene folder the run was made from (recorded in every manifest), when it still exists."""
-        for manifest in self.manifests.values():
-            path = Path(manifest.get("scene", ""))
-            if manifest.get("scene") and path.is_dir():
-                return path
-        return None
-
 
 REPORT_FILES = {"01_sfm": "01_sfm/report.json", "03_masks": "03_masks/masks.json",
                 "04_bg_pretrain": "04_bg_pretrain/report.json", "06_joint_opt": "06_joint_opt/report.json",
-                "07_eval": "07_eval/metrics.json", "07_speed": "07_eval/speed.json"}
+                "07_eval": "07_eval/metrics.json"}
 
 
 def _read_json(path: Path) -> dict:
