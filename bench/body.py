@@ -9,7 +9,6 @@ Each measurement is a small function in MEASUREMENTS returning rows, so more row
 
 from __future__ import annotations
 
-import statistics
 import sys
 import tempfile
 import time
@@ -22,6 +21,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench._timing import median_seconds  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from tests.body_files import write_random_smpl_npz  # noqa: E402
 
@@ -45,17 +45,6 @@ class Row:
     measurement: str
     batch: int
     seconds: float  # median wall time of one call
-
-
-def median_seconds(call: Callable[[], object], repeats: int) -> float:
-    """Median wall time of call() over repeats, after one untimed warm-up call."""
-    call()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        call()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def random_inputs(batch: int, rng: np.random.Generator) -> dict[str, torch.Tensor]:

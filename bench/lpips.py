@@ -11,34 +11,19 @@ from __future__ import annotations
 
 import importlib.util
 import os
-import statistics
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import glimpse  # noqa: E402,F401  (sets OpenMP's waiting before torch loads it)
 import torch  # noqa: E402
+from bench._timing import median_seconds  # noqa: E402
 
 THREADS = 2
 SEED = 0
 SIZES = (256, 512)
 NETS = ("alex", "vgg")
 REPEATS = {("alex", 256): 10, ("alex", 512): 5, ("vgg", 256): 3, ("vgg", 512): 3}
-
-
-def median_seconds(call: Callable[[], object], repeats: int, sync: Callable[[], None]) -> float:
-    """Median wall time of call() over repeats, after one untimed warm-up call."""
-    call()
-    sync()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        call()
-        sync()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def main() -> int:
@@ -63,7 +48,7 @@ def main() -> int:
                 pred.grad = None
                 module(pred, target).sum().backward()
 
-            rows.append((net, size, median_seconds(step, REPEATS[(net, size)], sync)))
+            rows.append((net, size, median_seconds(step, REPEATS[(net, size)], sync=sync)))
     base = rows[0][2]
     where = f"{THREADS} CPU threads" if device.type == "cpu" else torch.cuda.get_device_name(device)
     print(f"LPIPS forward + backward, one image pair, float32, {where}\n")

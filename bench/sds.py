@@ -19,15 +19,14 @@ from __future__ import annotations
 
 import argparse
 import resource
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench._timing import median_seconds, no_sync  # noqa: E402
 from glimpse.prior.sds.guidance import DiffusionModels, SDSConfig, SDSText, predicted_noise, sds_loss  # noqa: E402
 
 SD15_UNET = dict(sample_size=64, in_channels=4, out_channels=4, layers_per_block=2,
@@ -86,21 +85,6 @@ def peak_mb(device: torch.device) -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def timed(function, device: torch.device, warmup: int, repeats: int) -> float:
-    """Median seconds of ``function()`` over ``repeats`` runs after ``warmup`` ones."""
-    times = []
-    for k in range(warmup + repeats):
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        started = time.perf_counter()
-        function()
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        if k >= warmup:
-            times.append(time.perf_counter() - started)
-    return statistics.median(times)
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
@@ -137,8 +121,9 @@ def main() -> int:
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
     before = peak_mb(device)
-    base_s = timed(baseline, device, warmup, repeats)
-    step_s = timed(step, device, warmup, repeats)
+    sync = (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else no_sync
+    base_s = median_seconds(baseline, repeats, warmup, sync)
+    step_s = median_seconds(step, repeats, warmup, sync)
     machine = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU, {CPU_THREADS} threads"
     print(f"device {device} ({machine}), "
           f"{str(dtype).removeprefix('torch.')}, SD 1.5-sized random models\n")

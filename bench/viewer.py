@@ -10,9 +10,7 @@ view.still_max_side_px for a CANVAS browser canvas. 2 threads, the cpu backend.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +18,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench._timing import median_seconds  # noqa: E402
 from bench.speed import (  # noqa: E402
     PERSON_GAUSSIANS,
     RENDER,
@@ -42,17 +41,6 @@ from glimpse.view.session import ViewSession  # noqa: E402
 
 CANVAS = (1280, 720)  # a browser window's canvas, pixels
 WARMUP = 2
-
-
-def median_ms(draw, frames: int) -> float:
-    for _ in range(WARMUP):
-        draw()
-    times = []
-    for _ in range(frames):
-        start = time.perf_counter()
-        draw()
-        times.append(time.perf_counter() - start)
-    return 1000.0 * statistics.median(times)
 
 
 def main() -> None:
@@ -80,8 +68,9 @@ def main() -> None:
     for label, side in (("live (camera moving)", view.preview_max_side_px), ("sharp (camera at rest)",
                                                                               view.still_max_side_px)):
         shot = camera.resized(*render_size(*CANVAS, side))
-        floor = median_ms(lambda: render_shot(run, shot, 0, Edits(), torch.device("cpu")), args.frames)
-        ms = median_ms(lambda: session.render(shot), args.frames)
+        floor = 1000.0 * median_seconds(lambda: render_shot(run, shot, 0, Edits(), torch.device("cpu")),
+                                        args.frames, WARMUP)
+        ms = 1000.0 * median_seconds(lambda: session.render(shot), args.frames, WARMUP)
         print(f"| {label} | {shot.width}x{shot.height} | {ms:.1f} | {1000.0 / ms:.1f} | {ms / floor:.2f} |",
               flush=True)
 
