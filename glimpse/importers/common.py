@@ -1,5 +1,5 @@
-"""What every dataset importer shares: the options of ``glimpse import``, frame spans, held-out views
-undistorted to pinhole images, and the body model a dataset's SMPL parameters need."""
+"""What every dataset importer shares: the options of ``glimpse import``, frame spans, masks stored as any
+non-zero value, camera names, and the body models a dataset's SMPL parameters need."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import numpy as np
 from PIL import Image
 
 from glimpse.body.config import peek_body_model_kind
-from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
 
 
@@ -78,14 +77,6 @@ def smpl_model_file(options: ImportOptions, dataset: str, gender: str = "neutral
         raise GlimpseError(f"--body-model {path}: not an SMPL model (it is a free-body file); {dataset}'s parameters "
                            "are SMPL's")
     return path
-
-
-def undistorted_view(K: np.ndarray, dist: np.ndarray | None, rgb: np.ndarray, mask: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray | None]:
-    """A held-out view as the scene format wants it, pinhole with the same K: (rgb [H, W, 3] uint8, mask [H, W]
-    bool or None) undistorted."""
-    undistorter = Undistorter(K, dist, rgb.shape[1], rgb.shape[0])
-    return undistorter.image(rgb), (undistorter.mask(mask) if mask is not None else None)
 
 
 def nonzero_mask(path: Path) -> np.ndarray | None:

@@ -139,13 +139,14 @@ def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
     scored = frames[:: max(1, options.eval_every)]
     for camera_id in progress(heldout, desc=f"{DATASET} {name} held-out views", unit="camera"):
         camera = cameras[camera_id]
+        undistorter = None  # one per camera, made at its first image's size
         for frame in scored:
             rgb = read_rgb(folder / "images" / camera_id / f"{frame:06d}.jpg")
-            undistorter = Undistorter(camera["K"], camera["dist"], rgb.shape[1], rgb.shape[0])
-            masks = [undistorter.mask(m) for m in masks_of(folder, camera_id, frame)]
-            if frame == scored[0]:
+            if undistorter is None:
+                undistorter = Undistorter(camera["K"], camera["dist"], rgb.shape[1], rgb.shape[0])
                 writer.eval_camera(f"cam{camera_id}", rgb.shape[1], rgb.shape[0], camera["K"], camera["R"],
                                    camera["t"])
+            masks = [undistorter.mask(m) for m in masks_of(folder, camera_id, frame)]
             writer.eval_view(f"cam{camera_id}", frame, undistorter.image(rgb), np.logical_or.reduce(masks),
                              {f"p{k}": m for k, m in enumerate(masks)})
     return writer.finish()

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.errors import GlimpseError
-from glimpse.importers.common import ImportOptions, undistorted_view
+from glimpse.cameras.undistort import Undistorter
+from glimpse.importers.common import ImportOptions
 from glimpse.io.images import read_rgb
 from glimpse.io.progress import progress
 from glimpse.io.video import iter_video_frames
@@ -144,9 +145,11 @@ def import_panoptic(source: Path, scene_dir: Path, options: ImportOptions) -> Pa
     scored = frames[:: max(1, options.eval_every)]
     for name in progress(heldout, desc=f"{DATASET} {folder.name} held-out views", unit="camera"):
         camera = calibration[name]
+        undistorter = None  # one per camera, made at its first image's size
         for frame, distorted in HdFrames(folder, name).frames(scored):
-            rgb, _ = undistorted_view(camera["K"], camera["dist"], distorted)
-            if frame == scored[0]:
-                writer.eval_camera(f"hd_{name}", rgb.shape[1], rgb.shape[0], camera["K"], camera["R"], camera["t"])
-            writer.eval_view(f"hd_{name}", frame, rgb)  # no masks: scored on the full frame
+            if undistorter is None:
+                height, width = distorted.shape[:2]
+                undistorter = Undistorter(camera["K"], camera["dist"], width, height)
+                writer.eval_camera(f"hd_{name}", width, height, camera["K"], camera["R"], camera["t"])
+            writer.eval_view(f"hd_{name}", frame, undistorter.image(distorted))  # no masks: the full frame
     return writer.finish()

@@ -26,7 +26,8 @@ from scipy.spatial.transform import Rotation
 
 from glimpse.body.model_file import load_body_model_file
 from glimpse.errors import GlimpseError
-from glimpse.importers.common import ImportOptions, camera_name, nonzero_mask, smpl_model_file, undistorted_view
+from glimpse.cameras.undistort import Undistorter
+from glimpse.importers.common import ImportOptions, camera_name, nonzero_mask, smpl_model_file
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npy
 from glimpse.io.progress import progress
@@ -137,9 +138,9 @@ def import_zju_mocap(source: Path, scene_dir: Path, options: ImportOptions) -> P
     folder = sequence_folder(source, options.sequence)
     model_file = smpl_model_file(options, DATASET)
     cameras, images = read_annots(folder)
-    names = [Path(paths).parent.as_posix() for paths in images[0]] if images else []
     if not images:
         raise GlimpseError(f"{folder / 'annots.npy'}: no frame")
+    names = [Path(paths).parent.as_posix() for paths in images[0]]
     source_camera, heldout = pick_cameras(options.cameras, names)
     positions = list(range(len(images)))[options.frames or slice(None)]
     if not positions:
@@ -164,15 +165,15 @@ def import_zju_mocap(source: Path, scene_dir: Path, options: ImportOptions) -> P
     scored = positions[:: max(1, options.eval_every)]
     for index in progress(heldout, desc=f"{DATASET} {folder.name} held-out views", unit="camera"):
         name = camera_name(names[index])
-        K, D = cameras["K"][index], cameras["D"][index]
-        first = True
+        undistorter = None  # one per camera, made at its first image's size
         for position in scored:
-            rgb, mask = undistorted_view(K, D, read_rgb(folder / images[position][index]),
-                                         person_mask(folder, images[position][index]))
-            if first:
-                writer.eval_camera(name, rgb.shape[1], rgb.shape[0], K, cameras["R"][index], cameras["t"][index])
-                first = False
-            writer.eval_view(name, position, rgb, mask, {PID: mask})
+            rgb = read_rgb(folder / images[position][index])
+            if undistorter is None:
+                undistorter = Undistorter(cameras["K"][index], cameras["D"][index], rgb.shape[1], rgb.shape[0])
+                writer.eval_camera(name, rgb.shape[1], rgb.shape[0], cameras["K"][index], cameras["R"][index],
+                                   cameras["t"][index])
+            mask = undistorter.mask(person_mask(folder, images[position][index]))
+            writer.eval_view(name, position, undistorter.image(rgb), mask, {PID: mask})
     return writer.finish()
 
 
