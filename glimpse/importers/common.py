@@ -29,6 +29,15 @@ class ImportOptions:
     fps: float | None = None
 
 
+def numbered_frames(numbers: list[int], span: slice | None) -> list[int]:
+    """The frame ``numbers`` (ascending: a dataset's own frame numbers) that ``span`` selects when it counts those
+    numbers rather than positions (``--frames 13000:15160:4``); all of them without a span."""
+    if not numbers:
+        return []
+    selected = range(*(span or slice(None)).indices(numbers[-1] + 1))
+    return [n for n in numbers if n in selected]
+
+
 def parse_span(text: str) -> slice:
     """``A:B`` or ``A:B:STEP`` (B exclusive, either end may be empty) or ``A`` -> a slice over the sequence's
     frames, in the sequence's own order (0 = its first frame)."""

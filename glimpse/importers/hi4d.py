@@ -25,7 +25,7 @@ import numpy as np
 
 from glimpse.errors import GlimpseError
 from glimpse.cameras.undistort import Undistorter
-from glimpse.importers.common import ImportOptions, nonzero_mask, smpl_model_file
+from glimpse.importers.common import ImportOptions, nonzero_mask, numbered_frames, smpl_model_file
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npz
 from glimpse.io.progress import progress
@@ -115,8 +115,7 @@ def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
     if unknown:
         raise GlimpseError(f"--cameras: no camera {', '.join(unknown)} in {name} (cameras: "
                            f"{', '.join(sorted(cameras, key=int))})")
-    span = range(*(options.frames or slice(None)).indices(end + 1))
-    frames = [f for f in range(start, end + 1) if f in span]  # --frames counts Hi4D's frame numbers
+    frames = numbered_frames(list(range(start, end + 1)), options.frames)  # --frames counts Hi4D's frame numbers
     if not frames:
         raise GlimpseError(f"--frames selects none of {name}'s frames {start}..{end}")
     bodies = read_bodies(folder, frames)

@@ -26,7 +26,7 @@ import numpy as np
 
 from glimpse.errors import GlimpseError
 from glimpse.cameras.undistort import Undistorter
-from glimpse.importers.common import ImportOptions
+from glimpse.importers.common import ImportOptions, numbered_frames
 from glimpse.io.images import read_rgb
 from glimpse.io.progress import progress
 from glimpse.io.video import iter_video_frames
@@ -120,8 +120,7 @@ def import_panoptic(source: Path, scene_dir: Path, options: ImportOptions) -> Pa
         raise GlimpseError(f"--cameras: no HD camera {', '.join(unknown)} in {folder.name}'s calibration "
                            f"(HD cameras: {', '.join(sorted(calibration))})")
     available = pose_frames(folder)
-    span = range(*(options.frames or slice(None)).indices(available[-1] + 1)) if available else range(0)
-    frames = [f for f in available if f in span]  # --frames counts HD frame numbers
+    frames = numbered_frames(available, options.frames)  # --frames counts HD frame numbers
     if not frames:
         raise GlimpseError(f"{folder}: no {POSE_FOLDER}/body3DScene_*.json among the chosen frames "
                            f"({len(available)} HD frames have bodies)")
