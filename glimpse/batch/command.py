@@ -69,7 +69,7 @@ def scene_jobs(sources: list[Path], out: Path, params: str, threads: int, config
     if bad:
         raise GlimpseError("not a scene folder (no scene.yaml) nor a video: " + ", ".join(bad))
     for names, what in (([j.label for j in jobs], "folder or video name"),
-                         ([str(run_dir_of(j).name) for j in jobs if run_dir_of(j) is not None], "scene name")):
+                         ([run.name for j in jobs if (run := run_dir_of(j)) is not None], "scene name")):
         twins = sorted({name for name in names if names.count(name) > 1})
         if twins:
             raise GlimpseError(f"two sources share the {what} {', '.join(twins)}: their scenes or run folders "

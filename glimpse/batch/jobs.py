@@ -81,9 +81,9 @@ class Attempt:
 
 @dataclass
 class SceneResult:
-    """status: done | failed | bad input | interrupted (Ctrl-C); run_dir: OUT/<scene name> (None when no scene came to be);
-    headline: stage 07's numbers (HEADLINE_KEYS) when it finished; error: the end of the last failed
-    attempt's output."""
+    """status: done | failed | bad input | interrupted (Ctrl-C); run_dir: OUT/<scene name> (None when no scene
+    came to be); headline: stage 07's numbers (HEADLINE_KEYS) when it finished; error: the end of the last
+    failed attempt's output."""
 
     label: str
     source: str

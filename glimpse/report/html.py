@@ -51,9 +51,8 @@ def table(headers: Sequence[str] | None, rows: Sequence[Sequence[object]], decim
     return f"<table>{head}<tbody>{''.join(body)}</tbody></table>"
 
 
-def image(src: str, caption: str, width: int | None = None) -> str:
-    size = f' width="{width}"' if width else ""
-    return f'<figure><img src="{esc(src)}" alt="{esc(caption)}"{size}><figcaption>{esc(caption)}</figcaption></figure>'
+def image(src: str, caption: str) -> str:
+    return f'<figure><img src="{esc(src)}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
 
 
 def video(src: str, caption: str, height: int) -> str:
