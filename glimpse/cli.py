@@ -371,17 +371,13 @@ def _view(args: argparse.Namespace) -> int:
 
     import torch
 
-    from glimpse.config import apply_override, config_from_mapping, load_pipeline_yaml, parse_cli_params
+    from glimpse.config import command_params, config_from_mapping
     from glimpse.replay.finished import load_finished_run
     from glimpse.view.config import ViewConfig
     from glimpse.view.server import ViewerServer
     from glimpse.view.session import ViewSession
 
-    params = load_pipeline_yaml(resolve_auto=False)
-    for key, value in parse_cli_params(args.params):
-        if key.startswith("view."):
-            apply_override(params, key, value, "--params")
-    config = config_from_mapping(ViewConfig, params["view"], "view")
+    config = config_from_mapping(ViewConfig, command_params(args.params)["view"], "view")
     for path in args.motion:
         if not Path(path).is_file():
             raise GlimpseError(f"--motion {path}: no such file")

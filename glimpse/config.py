@@ -159,6 +159,12 @@ def resolve_params(
     return params
 
 
+def command_params(cli_params: str) -> Params:
+    """pipeline.yaml with ``cli_params`` ("section.key=value ...") applied and no scene: where a command outside
+    the stages (ingest, view, batch) reads its own section."""
+    return resolve_params(load_pipeline_yaml(resolve_auto=False), None, parse_cli_params(cli_params))
+
+
 # --------------------------------------------------------------------------- typed configs
 
 

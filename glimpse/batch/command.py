@@ -16,7 +16,7 @@ from glimpse.batch.config import BatchConfig
 from glimpse.batch.executors import run_local, run_ray, run_slurm
 from glimpse.batch.jobs import SceneJob, SceneResult, run_dir_of
 from glimpse.batch.summary import write_summary
-from glimpse.config import apply_override, config_from_mapping, load_pipeline_yaml, parse_cli_params
+from glimpse.config import apply_override, command_params, config_from_mapping
 from glimpse.errors import EXIT_STAGE_FAILED, GlimpseError
 
 BATCH_PREFIX = "batch."
@@ -25,10 +25,7 @@ BATCH_PREFIX = "batch."
 def batch_settings(params: str, slurm_profile: Path | None) -> tuple[BatchConfig, str]:
     """The batch section with ``batch.*`` overrides and the profile applied; the other overrides, for the
     stages."""
-    defaults = load_pipeline_yaml(resolve_auto=False)
-    for key, value in parse_cli_params(params):
-        if key.startswith(BATCH_PREFIX):
-            apply_override(defaults, key, value, "--params")
+    settings = command_params(params)  # every override checked here, before any job starts
     stage_params = shlex.join(t for t in shlex.split(params or "") if not t.startswith(BATCH_PREFIX))
     if slurm_profile is not None:
         try:
@@ -38,8 +35,8 @@ def batch_settings(params: str, slurm_profile: Path | None) -> tuple[BatchConfig
         if not isinstance(profile, dict):
             raise GlimpseError(f"--slurm-profile {slurm_profile}: must map batch.slurm keys to values")
         for key, value in profile.items():
-            apply_override(defaults, f"batch.slurm.{key}", value, str(slurm_profile))
-    return config_from_mapping(BatchConfig, defaults["batch"], "pipeline.yaml batch"), stage_params
+            apply_override(settings, f"batch.slurm.{key}", value, str(slurm_profile))
+    return config_from_mapping(BatchConfig, settings["batch"], "pipeline.yaml batch"), stage_params
 
 
 def with_options(config: BatchConfig, args: argparse.Namespace) -> BatchConfig:

@@ -59,12 +59,6 @@ class IngestConfig:
 
 def load_ingest_config(cli_params: str = "") -> IngestConfig:
     """pipeline.yaml's ``ingest`` section with "ingest.key=value ..." overrides (the PARAMS syntax)."""
-    from glimpse.config import (
-        config_from_mapping,
-        load_pipeline_yaml,
-        parse_cli_params,
-        resolve_params,
-    )
+    from glimpse.config import command_params, config_from_mapping
 
-    params = resolve_params(load_pipeline_yaml(resolve_auto=False), None, parse_cli_params(cli_params))
-    return config_from_mapping(IngestConfig, params["ingest"], "pipeline.yaml ingest")
+    return config_from_mapping(IngestConfig, command_params(cli_params)["ingest"], "pipeline.yaml ingest")
