@@ -3,9 +3,12 @@ side by side, on random scenes (N Gaussians, typical scales, depth 2-8 m, 60-deg
 camera); then forward-only frames per second with 15k Gaussians (the paper's Table 5).
 
 Each measurement runs in a fresh subprocess, so its peak memory (VmHWM) minus the
-memory held before the first render is the renderer's extra memory.
+memory held before the first render is the renderer's extra memory. ``--device cuda`` times
+gsplat on the GPU instead, in this process (synchronised; peak extra memory is torch.cuda's), on the
+same scenes with 1024² added, against Glimpse's C++ kernel on that machine's CPU cores in the same run
+(the pure-PyTorch backend runs on CPU tensors only).
 
-    .venv/bin/python bench/raster.py [--quick]
+    .venv/bin/python bench/raster.py [--quick] [--device cuda]
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ def _memory_kb(field: str) -> int:
     return 0
 
 
-def measure(backend: str, count: int, size: int, backward: bool) -> dict:
+def measure(backend: str, count: int, size: int, backward: bool, device: str = "cpu", threads: int = 2) -> dict:
     """Runs in the subprocess: median seconds per call and peak extra memory (MB)."""
     import torch
 
@@ -48,7 +51,8 @@ def measure(backend: str, count: int, size: int, backward: bool) -> dict:
     from glimpse.render.projection import fov_to_focal
 
     torch.manual_seed(0)
-    torch.set_num_threads(2)
+    torch.set_num_threads(threads)
+    on_gpu = device == "cuda"
     focal = fov_to_focal(FOV_DEG, size)
     camera = Camera(torch.tensor([[focal, 0, (size - 1) / 2], [0, focal, (size - 1) / 2], [0, 0, 1.0]]),
                     torch.eye(3), torch.zeros(3), size, size)
@@ -63,17 +67,24 @@ def measure(backend: str, count: int, size: int, backward: bool) -> dict:
     if backward:
         params = {k: v.requires_grad_(True) for k, v in params.items()}
     target = torch.rand(size, size, 3)
+    if on_gpu:
+        torch.cuda.reset_peak_memory_stats()
+        camera = Camera(camera.K.cuda(), camera.R.cuda(), camera.t.cuda(), size, size)
+        params = {k: v.detach().cuda().requires_grad_(backward) for k, v in params.items()}
+        target = target.cuda()
 
     def call() -> None:
         out = rasterize(camera, **params, settings=RenderConfig(backend, sh_degree=0, antialiased=False))
         if backward:
             ((out.rgb - target) ** 2).mean().backward()
+        if on_gpu:
+            torch.cuda.synchronize()
 
     if backend == "cpu":
         from glimpse.render.composite_cpu import extension
 
         extension()  # load (or build once) the C++ kernel before measuring memory
-    before = _memory_kb("VmRSS")
+    before = torch.cuda.memory_allocated() if on_gpu else _memory_kb("VmRSS") * 1024
     call()  # warm-up
     times, spent = [], 0.0
     while len(times) < 2 or (spent < TIME_BUDGET_S and len(times) < MAX_REPEATS):
@@ -81,7 +92,8 @@ def measure(backend: str, count: int, size: int, backward: bool) -> dict:
         call()
         times.append(time.perf_counter() - start)
         spent += times[-1]
-    return {"seconds": statistics.median(times), "extra_mb": (_memory_kb("VmHWM") - before) / 1024}
+    peak = torch.cuda.max_memory_allocated() if on_gpu else _memory_kb("VmHWM") * 1024
+    return {"seconds": statistics.median(times), "extra_mb": (peak - before) / 2**20}
 
 
 def run(backend: str, count: int, size: int, backward: bool) -> dict:
@@ -94,7 +106,11 @@ def run(backend: str, count: int, size: int, backward: bool) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="only 50k Gaussians at 256x256")
+    parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"),
+                        help="cuda: gsplat against the pure-PyTorch backend on the GPU")
     args = parser.parse_args()
+    if args.device == "cuda":
+        return main_cuda(args.quick)
     cases = [(50_000, 256)] if args.quick else [(n, s) for n in COUNTS for s in SIZES]
     print(f"forward+backward, 2 threads; median seconds; peak extra memory in MB; torch measured up to "
           f"{TORCH_MAX_PIXELS_X_GAUSSIANS:.1e} pixel-Gaussians\n")
@@ -114,6 +130,31 @@ def main() -> None:
     for size in FPS_SIZES:
         result = run("cpu", FPS_COUNT, size, False)
         print(f"| {size}² | {1000 * result['seconds']:.1f} | {1 / result['seconds']:.1f} |", flush=True)
+
+
+def main_cuda(quick: bool) -> None:
+    """The GPU tables: gsplat and the PyTorch backend on CUDA tensors, the same scenes as on the CPU."""
+    cases = [(50_000, 256)] if quick else [(n, s) for n in COUNTS for s in (*SIZES, 1024)]
+    import os
+
+    import torch
+
+    threads = len(os.sched_getaffinity(0))
+    print(f"forward+backward; gsplat on {torch.cuda.get_device_name()} (median ms, synchronised; peak extra GPU "
+          f"memory in MB) against the C++ kernel on this machine's {threads} CPU threads (median ms)\n")
+    print("| Gaussians | size | gsplat ms | gsplat MB | cpu ms | gsplat speed-up |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for count, size in cases:
+        fast = measure("gsplat", count, size, True, "cuda")
+        ref = measure("cpu", count, size, True, "cpu", threads)
+        print(f"| {count:,} | {size}² | {1000 * fast['seconds']:.2f} | {fast['extra_mb']:.0f} | "
+              f"{1000 * ref['seconds']:.1f} | {ref['seconds'] / fast['seconds']:.0f}x |", flush=True)
+    print(f"\nforward only on CUDA, {FPS_COUNT:,} Gaussians (paper Table 5 setting), gsplat\n")
+    print("| size | ms per frame | frames per second |")
+    print("|---:|---:|---:|")
+    for size in FPS_SIZES:
+        result = measure("gsplat", FPS_COUNT, size, False, "cuda")
+        print(f"| {size}² | {1000 * result['seconds']:.2f} | {1 / result['seconds']:.0f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -55,13 +55,18 @@ def render_with_grads(backend: str, params: dict, cam: Camera, covariance_input:
     leaves = {k: v.clone().requires_grad_(True) for k, v in params.items()}
     geometry = ({"covariances": quat_scale_to_covariance(leaves["quats"], leaves["scales"])} if covariance_input
                 else {"quats": leaves["quats"], "scales": leaves["scales"]})
-    groups = torch.arange(len(params["means"])) % 3
+    device = params["means"].device
+    groups = torch.arange(len(params["means"]), device=device) % 3
     out = rasterize(cam, means=leaves["means"], opacities=leaves["opacities"], colors=leaves["colors"],
-                    background=torch.tensor([0.1, 0.5, 0.9]), groups=groups, num_groups=3,
+                    background=torch.tensor([0.1, 0.5, 0.9], device=device), groups=groups, num_groups=3,
                     settings=settings(backend, antialiased), **geometry)
-    g = torch.Generator().manual_seed(7)  # the same random cotangents for both backends
-    loss = ((out.rgb * torch.rand(out.rgb.shape, generator=g)).sum() + (out.alpha * torch.rand(out.alpha.shape, generator=g)).sum()
-            + (out.group_alpha[1] * torch.rand(out.alpha.shape, generator=g)).sum() + 0.1 * out.depth.sum())
+    g = torch.Generator().manual_seed(7)  # the same random cotangents for both backends (drawn on the CPU)
+
+    def cotangent(shape: torch.Size) -> torch.Tensor:
+        return torch.rand(shape, generator=g).to(device)
+
+    loss = ((out.rgb * cotangent(out.rgb.shape)).sum() + (out.alpha * cotangent(out.alpha.shape)).sum()
+            + (out.group_alpha[1] * cotangent(out.alpha.shape)).sum() + 0.1 * out.depth.sum())
     loss.backward()
     return out, {k: v.grad for k, v in leaves.items()}
 

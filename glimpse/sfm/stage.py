@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,11 +22,13 @@ from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
 from glimpse.io.images import frame_name
 from glimpse.scene import Scene
-from glimpse.sfm.colmap import SfmOptions, run_sfm, triangulate_known_poses
 from glimpse.sfm.config import CamerasConfig
 from glimpse.sfm.frames import select_frame_ids, write_frames
 from glimpse.sfm.motion import measure_camera_motion
 from glimpse.sfm.person_regions import find_person_regions
+
+if TYPE_CHECKING:  # COLMAP is loaded only when the camera moves: a static-camera run needs no pycolmap
+    from glimpse.sfm.colmap import SfmOptions
 
 log = logging.getLogger("glimpse")
 
@@ -94,6 +97,8 @@ def choose_mode(scene: Scene, config: CamerasConfig) -> tuple[str, str]:
 
 
 def _sfm_options(config: CamerasConfig, threads: int, seed: int) -> SfmOptions:
+    from glimpse.sfm.colmap import SfmOptions
+
     return SfmOptions(
         max_features=config.sift_max_features, max_image_size=config.sift_max_image_size,
         sequential_overlap=config.sequential_overlap, min_num_matches=config.min_num_matches,
@@ -147,7 +152,6 @@ def estimate_cameras(
     if not regions.sources:
         warnings.append(NO_PERSON_CUES_WARNING if scene.humans else NO_PEOPLE_WARNING)
         log.warning(warnings[-1])
-    options = _sfm_options(config, threads, seed)
     shape = (scene.height, scene.width)
 
     if mode == "provided":
@@ -155,7 +159,10 @@ def estimate_cameras(
         if _is_static(cameras, config.static_pose_tolerance_m):
             return CamerasOutcome(mode, reason, "static", cameras=cameras, units="metres", warnings=warnings,
                                   **outcome_args)
-        result = triangulate_known_poses(work, {f: frames[f] for f in cameras}, regions, shape, cameras, options)
+        from glimpse.sfm.colmap import triangulate_known_poses
+
+        result = triangulate_known_poses(work, {f: frames[f] for f in cameras}, regions, shape, cameras,
+                                         _sfm_options(config, threads, seed))
         return CamerasOutcome(mode, reason, "moving", cameras=cameras, units="metres", xyz=result.xyz, rgb=result.rgb,
                               warnings=warnings, timings_s=result.timings_s,
                               sfm={"masking": list(regions.sources), "points": int(len(result.xyz))}, **outcome_args)
@@ -167,7 +174,9 @@ def estimate_cameras(
         if any(not np.allclose(k, scene.cameras.K) for k in per_frame_K.values()):
             raise GlimpseError("01_sfm.mode=sfm with per-frame K (zoom) is not supported: use mode provided")
         known_K = scene.cameras.K
-    result = run_sfm(work, frames, regions, shape, known_K, options)
+    from glimpse.sfm.colmap import run_sfm
+
+    result = run_sfm(work, frames, regions, shape, known_K, _sfm_options(config, threads, seed))
     registered = len(result.cameras) / len(frame_ids)
     sfm_report = {"masking": list(regions.sources), "models": result.num_models, "registered": len(result.cameras),
                   "frames": len(frame_ids), "intrinsics": "fixed (cameras.json)" if known_K is not None else "estimated",
