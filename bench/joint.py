@@ -142,10 +142,11 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
             priors: tuple[str, ...], pictures: Path | None) -> None:
     print(f"bodies fitted with 02_smpl_fit.mode={fit}; seed {seed}; stage 04 schedule_scale "
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
-    print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 | "
-          "per person PSNR (own mask) | composite PSNR | input-view PSNR, people px | Gaussians per person | "
-          f"> {HEDGEHOG_SCALE_M * 100:g} cm / ratio > {HEDGEHOG_RATIO:g} | canonical holes % | it/s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | seen PSNR | SSIM | LPIPS x100 | "
+          "never-seen PSNR | SSIM | LPIPS x100 | per person PSNR (own mask) | composite PSNR | input-view PSNR, "
+          f"people px | Gaussians per person | > {HEDGEHOG_SCALE_M * 100:g} cm / ratio > {HEDGEHOG_RATIO:g} | "
+          "canonical holes % | it/s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     baselines = []
     for scenario in scenarios:
         for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors):
@@ -153,32 +154,36 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
             report = read_json(run_dir / "06_joint_opt" / "report.json")
             tables = metrics["tables"]
             humans = tables["humans"]["rows"]
+            seen = tables.get("seen", {"rows": []})["rows"]
             unseen = tables.get("never_seen", {"rows": []})["rows"]
             people = tables.get("people", {"rows": []})["rows"]
-            per_person = ", ".join(f"{r['label']} {r['psnr']:.1f}" for r in people)
+            per_person = ", ".join(f"{r['label']} {r['psnr']:.1f}" for r in people if "baseline" not in r["label"])
             composite = tables["composite"]["rows"][0]
             counts = ", ".join(str(p["gaussians"]) for p in report["people"].values())
             total, large, needles = hedgehogs(run_dir)
             people_of_run = trained_people(run_dir)
-            never = (f"{unseen[0]['psnr']:.2f} | {unseen[0]['ssim']:.4f} | {unseen[0]['lpips']:.2f}" if unseen
-                     else "- | - | -")
             print(f"| {scenario} | {report['prior']} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
-                  f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {never} | {per_person} | "
-                  f"{composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | {large} / {needles} of {total} | "
+                  f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {_cells(seen, 0)} | {_cells(unseen, 0)} | "
+                  f"{per_person} | {composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | "
+                  f"{large} / {needles} of {total} | "
                   f"{hole_shares(people_of_run)} | {report['iterations_per_s']:.2f} |", flush=True)
             if prior == priors[0]:
-                baselines.append((scenario, humans[1:], unseen[1:]))
+                baselines.append((scenario, humans[1:], seen[1:], unseen[1:]))
             if pictures is not None:
                 turntables(people_of_run, pictures / f"turntable_{scenario}_{prior}.png")
     print("\nBaselines (same views and protocol):\n")
-    print("| scenario | baseline | humans PSNR | SSIM | LPIPS x100 | never-seen PSNR | SSIM | LPIPS x100 |")
-    print("|---|---|---|---|---|---|---|---|")
-    for scenario, humans, unseen in baselines:
+    print("| scenario | baseline | humans PSNR | SSIM | LPIPS x100 | seen PSNR | SSIM | LPIPS x100 | never-seen PSNR | "
+          "SSIM | LPIPS x100 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for scenario, humans, seen, unseen in baselines:
         for k, row in enumerate(humans):
-            never = (f"{unseen[k]['psnr']:.2f} | {unseen[k]['ssim']:.4f} | {unseen[k]['lpips']:.2f}"
-                     if k < len(unseen) else "- | - | -")
             print(f"| {scenario} | {row['label'].removeprefix('baseline: ')} | {row['psnr']:.2f} | {row['ssim']:.4f} | "
-                  f"{row['lpips']:.2f} | {never} |")
+                  f"{row['lpips']:.2f} | {_cells(seen, k)} | {_cells(unseen, k)} |")
+
+
+def _cells(rows: list[dict], k: int) -> str:
+    """PSNR | SSIM | LPIPS x100 of row ``k`` of a table's rows, or dashes when the table has no such row."""
+    return f"{rows[k]['psnr']:.2f} | {rows[k]['ssim']:.4f} | {rows[k]['lpips']:.2f}" if k < len(rows) else "- | - | -"
 
 
 def speed(root: Path, priors: tuple[str, ...]) -> None:

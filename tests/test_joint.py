@@ -22,7 +22,7 @@ from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import EXIT_BAD_INPUT, ConfigError, GlimpseError
 from glimpse.eval.never_seen import PosedBodies
-from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, score_views
+from glimpse.eval.score import EMPTY_ROW, FLAT_ROW, RENDER_ROW, person_flat_row, score_views
 from glimpse.eval.views import ViewSet, heldout_views
 from glimpse.fixtures.scenes import make_scene
 from glimpse.gaussians.model import GaussianModel
@@ -263,6 +263,7 @@ def test_stage07_writes_a_report_whose_every_image_and_video_loads_in_a_browser(
     humans = read_json(run_dir / "07_eval" / "manifest.json")["summary"]["humans_psnr_db"]
     assert f"PSNR {humans:.2f} dB" in text  # the headline is stage 07's
     assert "06_joint_opt.schedule_scale" in text and "not run" not in text  # SHORT's overrides; every stage ran
+    assert "Seen and never-seen regions of the people" in text  # the two tables side by side
     with sync_playwright() as playwright:
         browser = launch(playwright)
         page = browser.new_page()
@@ -375,14 +376,22 @@ def test_stage07_states_its_protocol_and_falls_back_to_the_input_view(tiny, tmp_
     scene, run_dir = tiny
     metrics = read_json(run_dir / "07_eval" / "metrics.json")
     assert metrics["views"].startswith("held-out")
-    assert set(metrics["tables"]) == {"humans", "people", "never_seen", "composite"}
-    for table in ("humans", "never_seen"):  # the render and both baselines, the render ahead of an empty one
+    assert set(metrics["tables"]) == {"humans", "people", "seen", "never_seen", "composite"}
+    for table in ("humans", "seen", "never_seen"):  # the render and both baselines, the render ahead of an empty one
         rows = {row["label"]: row for row in metrics["tables"][table]["rows"]}
         assert list(rows) == [RENDER_ROW, EMPTY_ROW, FLAT_ROW]
         assert rows[RENDER_ROW]["lpips"] < rows[EMPTY_ROW]["lpips"]
     assert metrics["tables"]["never_seen"]["rows"][0]["psnr"] > metrics["tables"]["never_seen"]["rows"][1]["psnr"]
+    # seen and never-seen split each view's union mask: a view with people has seen pixels, so the seen table
+    # scores at least the views the never-seen one does
+    assert metrics["tables"]["seen"]["rows"][0]["n_frames"] >= metrics["tables"]["never_seen"]["rows"][0]["n_frames"]
+    people = [row["label"] for row in metrics["tables"]["people"]["rows"]]
+    assert people == [label for pid in ("p0", "p1") for label in (pid, person_flat_row(pid))]
     text = (run_dir / "07_eval" / "metrics.md").read_text()
     assert "Humans only" in text and "union of the people's masks" in text and "none of whose vertices" in text
+    assert "Seen regions" in text and "less the never-seen pixels" in text
+    summary = read_json(run_dir / "07_eval" / "manifest.json")["summary"]
+    assert summary["seen_psnr_db"] == pytest.approx(metrics["tables"]["seen"]["rows"][0]["psnr"], abs=1e-3)
     out = run("07_eval", scene, run_dir.parent,
               SHORT + " 07_eval.heldout=input 07_eval.renders.enabled=false 07_eval.speed.enabled=false")
     assert "INPUT view" in read_json(out / "metrics.json")["views"]

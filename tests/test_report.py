@@ -12,7 +12,23 @@ from glimpse.fixtures.scenes import make_scene
 from glimpse.report.figures import mask_overlay, person_colour, scaled_to_height, spread_indices
 from glimpse.report.html import markdown, table
 from glimpse.report.run_record import changed_params, read_run, warnings_in_log
+from glimpse.report.sections import seen_beside_never_seen
 from tests.stage_helpers import run
+
+
+def test_seen_and_never_seen_rows_stand_side_by_side_by_label():
+    def row(label, psnr):
+        return {"label": label, "psnr": psnr, "ssim": 0.5, "lpips": 7.0}
+
+    tables = {"seen": {"rows": [row("humans only", 30.0), row("baseline: bodies in mean colour", 24.0)]},
+              "never_seen": {"rows": [row("humans only", 15.0), row("baseline: empty render (black)", 9.0)]}}
+    html = seen_beside_never_seen(tables)
+    body = html.split("<tbody>")[1]
+    rendered = body.split("</tr>")
+    assert "humans only" in rendered[0] and "30.000" in rendered[0] and "15.000" in rendered[0]
+    assert "bodies in mean colour" in rendered[1] and "24.000" in rendered[1] and rendered[1].count("<td>-</td>") == 3
+    assert "empty render" in rendered[2] and "9.000" in rendered[2] and rendered[2].count("<td>-</td>") == 3
+    assert seen_beside_never_seen({"humans": {"rows": [row("humans only", 1.0)]}}) == ""
 
 
 def test_changed_parameters_are_the_leaves_that_differ_from_the_defaults():

@@ -24,8 +24,8 @@ LOG_TAIL_LINES = 15  # lines of a failed attempt's output kept in the result
 NOT_RETRIED = (EXIT_USAGE, EXIT_BAD_INPUT)  # a wrong command line or bad input fails the same way again
 STOPPED_BY_USER = (EXIT_INTERRUPTED, -signal.SIGINT)  # Ctrl-C: not retried (Slurm's SIGTERM/SIGUSR2 are)
 STATUSES = ("done", "failed", "bad input", "interrupted")
-HEADLINE_KEYS = ("humans_psnr_db", "humans_ssim", "humans_lpips_x100", "never_seen_psnr_db", "never_seen_lpips_x100",
-                 "composite_psnr_db")
+HEADLINE_KEYS = ("humans_psnr_db", "humans_ssim", "humans_lpips_x100", "seen_psnr_db", "seen_lpips_x100",
+                 "never_seen_psnr_db", "never_seen_lpips_x100", "composite_psnr_db")
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ from glimpse.io.staging import staged_file
 
 BATCH_FORMAT = "glimpse-batch/1"
 COLUMNS = {"humans_psnr_db": ("humans PSNR", 2), "humans_ssim": ("humans SSIM", 4),
-           "humans_lpips_x100": ("humans LPIPS×100", 2), "never_seen_psnr_db": ("never-seen PSNR", 2),
+           "humans_lpips_x100": ("humans LPIPS×100", 2), "seen_psnr_db": ("seen PSNR", 2),
+           "seen_lpips_x100": ("seen LPIPS×100", 2), "never_seen_psnr_db": ("never-seen PSNR", 2),
            "never_seen_lpips_x100": ("never-seen LPIPS×100", 2), "composite_psnr_db": ("full-frame PSNR", 2)}
 
 

@@ -53,9 +53,9 @@ def headline(record: RunRecord) -> str:
         return '<p class="headline">No metrics yet: stage 07_eval has not run.</p>'
     parts = [f"humans only (held-out): PSNR {s['humans_psnr_db']:.2f} dB, SSIM {s['humans_ssim']:.4f}, "
              f"LPIPS×100 {s['humans_lpips_x100']:.2f}"] if "humans_psnr_db" in s else []
-    if "never_seen_psnr_db" in s:
-        parts.append(f"never-seen regions: PSNR {s['never_seen_psnr_db']:.2f} dB, "
-                     f"LPIPS×100 {s['never_seen_lpips_x100']:.2f}")
+    for key, words in (("seen", "seen regions"), ("never_seen", "never-seen regions")):
+        if f"{key}_psnr_db" in s:
+            parts.append(f"{words}: PSNR {s[f'{key}_psnr_db']:.2f} dB, LPIPS×100 {s[f'{key}_lpips_x100']:.2f}")
     parts.append(f"full frame: PSNR {s['composite_psnr_db']:.2f} dB")
     views = f"{s.get('view_count', '?')} {s.get('views', '')} views"
     return (f'<p class="headline">{esc("; ".join(parts))}.<br><span class="muted">{esc(views)}, prior '
@@ -106,8 +106,10 @@ def metrics_section(record: RunRecord, assets: Assets) -> str:
     if not record.has("07_eval"):
         return not_run("07_eval")
     out = record.stage_dir("07_eval")
-    html = markdown((out / "metrics.md").read_text()) if (out / "metrics.md").is_file() else ""
-    humans = record.reports.get("07_eval", {}).get("tables", {}).get("humans", {}).get("rows", [])
+    tables = record.reports.get("07_eval", {}).get("tables", {})
+    html = seen_beside_never_seen(tables)
+    html += markdown((out / "metrics.md").read_text()) if (out / "metrics.md").is_file() else ""
+    humans = tables.get("humans", {}).get("rows", [])
     if humans and humans[0].get("frames"):
         names = [f["frame"] for f in humans[0]["frames"]]
         series = [(row["label"], list(range(len(names))), [f["psnr"] for f in row["frames"]]) for row in humans]
@@ -119,6 +121,27 @@ def metrics_section(record: RunRecord, assets: Assets) -> str:
     if (out / "speed.md").is_file():
         html += markdown((out / "speed.md").read_text())
     return html
+
+
+def seen_beside_never_seen(tables: dict) -> str:
+    """The seen and never-seen tables side by side, one row per candidate (the render, then the baselines):
+    what the reconstruction reproduced next to what the prior guessed. Empty when neither table exists."""
+    seen = {row["label"]: row for row in tables.get("seen", {}).get("rows", [])}
+    unseen = {row["label"]: row for row in tables.get("never_seen", {}).get("rows", [])}
+    if not seen and not unseen:
+        return ""
+    labels = list(seen) + [label for label in unseen if label not in seen]
+
+    def cells(row: dict | None) -> list[object]:
+        return [row["psnr"], row["ssim"], row["lpips"]] if row else ["-", "-", "-"]
+
+    rows = [[label, *cells(seen.get(label)), *cells(unseen.get(label))] for label in labels]
+    headers = ["", "seen PSNR (dB)", "seen SSIM", "seen LPIPS×100", "never-seen PSNR (dB)", "never-seen SSIM",
+               "never-seen LPIPS×100"]
+    return ("<h3>Seen and never-seen regions of the people</h3>" + table(headers, rows, decimals=3)
+            + '<p class="muted">Seen: the people\'s pixels whose body surface some input frame showed (what the '
+              "reconstruction reproduces); never seen: those no input frame showed (what the prior guesses). "
+              "Protocols in the tables below.</p>")
 
 
 def _video_stills(assets: Assets, path: Path, stem: str, caption: str) -> str:

@@ -9,9 +9,10 @@ Params:  07_eval, body, render, compute (pipeline.yaml).
 Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
   metrics.json   glimpse-eval-metrics/1: tables "humans" (GTU's protocol: people only on black against the
                  ground truth masked by the union human mask), "people" (each person inside their own mask),
-                 "never_seen" (humans only, restricted to the body surface no input frame saw), "composite"
-                 (the whole frame); baselines (empty render, bodies in mean colour) in the humans and
-                 never-seen tables; per-view values and each table's protocol
+                 "seen" and "never_seen" (humans only, restricted to the body surface some input frame saw, and
+                 to the rest), "composite" (the whole frame); baselines (empty render, bodies in mean colour)
+                 in the humans, seen and never-seen tables, the flat bodies in the people table; per-view
+                 values and each table's protocol
   metrics.md     the same tables in Markdown, each followed by its protocol
   renders/       input.mp4, heldout_<camera>.mp4, orbit.mp4, freeze.mp4, person_<pid>.mp4, removed_<pid>.mp4,
                  motion_<pid>.mp4 (glimpse/eval/renders.py; 07_eval.renders)
