@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
@@ -104,7 +105,8 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
             _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
             centres = {fid: camera.centre for fid, camera in cameras.items()}
             for mode in ("keypoints3d", "keypoints2d"):
-                fitter = Fitter(scene, model, cameras, FitConfig(**{**vars(config), "mode": mode}), "metres")
+                fitter = Fitter(scene, BodyModels(model), cameras, FitConfig(**{**vars(config), "mode": mode}),
+                                "metres")
                 started = time.perf_counter()
                 fits, floor = fitter.fit_people([person for _, person in sorted(scene.humans.items())])
                 seconds = time.perf_counter() - started
@@ -154,10 +156,10 @@ def evaluate_unseen(size: str, root: Path, ground_mode: str = "auto") -> list[di
             motions = [m for m in raw["pose_prior_motions"] if m != own_motion]
             config = config_from_mapping(FitConfig, {**raw, "overlay": False, "pose_prior_motions": motions},
                                          "pipeline.yaml 02_smpl_fit")
-            fitters.append(Fitter(scene, model, cameras, config, "metres"))
+            fitters.append(Fitter(scene, BodyModels(model), cameras, config, "metres"))
             pending.append(fitters[-1].start(person))
             truths[pid] = dict(np.load(truth_dir / f"{pid}_body.npz"))
-        place_on_common_floor(pending, model, cameras, fitters[0].config, scene.fps)
+        place_on_common_floor(pending, BodyModels(model), cameras, fitters[0].config, scene.fps)
         fitted = {}
         for fitter, person_fit in zip(fitters, pending):
             fit = fitter.finish(person_fit)

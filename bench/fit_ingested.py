@@ -32,6 +32,7 @@ from ingest import fixture_video, found_people, true_people  # noqa: E402  (benc
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
@@ -113,7 +114,7 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
         config = config_from_mapping(FitConfig, {**raw, "overlay": False, "mode": "keypoints2d", "weights": weights,
                                                  "relative3d": relative3d}, "pipeline.yaml 02_smpl_fit")
         started = time.perf_counter()
-        fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(people)
+        fits, floor = Fitter(scene, BodyModels(model), cameras, config, "metres").fit_people(people)
         seconds = time.perf_counter() - started
         fitted = {ids[fit.pid]: fit.params for fit in fits}
         truths = {pid: dict(np.load(truth_dir / f"{pid}_body.npz")) for pid in fitted}

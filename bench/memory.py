@@ -82,8 +82,7 @@ def repeat_run(run_dir: Path, count: int, target: Path) -> None:
 
 def child(stage: str, run_dir: Path, cache: int, out: Path) -> None:
     """One stage's own code on ``run_dir``'s inputs (in this process: the parent reads its peak memory)."""
-    from glimpse.body.config import resolve_model_path
-    from glimpse.body.model import BodyModel
+    from glimpse.body.models import BodyModels
     from glimpse.compute import ComputeConfig, apply_compute
     from glimpse.config import config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params
     from glimpse.io.frame_cache import FrameCacheSize
@@ -116,9 +115,9 @@ def child(stage: str, run_dir: Path, cache: int, out: Path) -> None:
         background = GaussianModel.from_splats(read_gaussians_ply(run_dir / "04_bg_pretrain" / "background.ply")[0])
         inputs = JointInputs(cameras, width, height, run_dir / "01_sfm" / "frames", run_dir / "03_masks" / "masks",
                              run_dir / "03_masks" / "occluders", bodies, background, 25.0)
-        body_model = BodyModel.from_file(resolve_model_path(section["body"]))
+        body_models = BodyModels.load(section["body"])
         surface = config_from_mapping(SurfacePriorConfig, params["prior_surface"], "prior_surface")
-        train_joint(inputs, section["06_joint_opt"], section["render"], section["body"], body_model, "surface",
+        train_joint(inputs, section["06_joint_opt"], section["render"], section["body"], body_models, "surface",
                     surface, SEED, device, frames, out / "work", "bench", out)
 
 

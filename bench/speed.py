@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.body.config import BodyConfig  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.body.params import BodyParams  # noqa: E402
 from glimpse.body.skinning import bake_skin_weight_grid  # noqa: E402
 from glimpse.cameras.model import PinholeCamera  # noqa: E402
@@ -183,7 +184,7 @@ def main() -> None:
         background = room_background(SCENE_BACKGROUND, rng)
         for width, height in SCENE_SIZES:
             run = FinishedRun(Path("."), width, height, {0: wall_camera(width, height)}, background, people,
-                              body_model, RENDER)
+                              BodyModels(body_model), RENDER)
             timing = time_scene(run, [0] * SCENE_FRAMES, config.warmup_frames, device)
             print(row("whole scene", timing), flush=True)
     if args.run:

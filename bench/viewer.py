@@ -32,6 +32,7 @@ from bench.speed import (  # noqa: E402
 )
 from glimpse.body.config import BodyConfig  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
 from glimpse.replay.finished import FinishedRun  # noqa: E402
 from glimpse.replay.render import Edits, render_shot  # noqa: E402
@@ -58,7 +59,7 @@ def main() -> None:
                              np.array([1.5 * (k - (SCENE_PEOPLE - 1) / 2), 0.0, 0.0])) for k in range(SCENE_PEOPLE)]
     background = room_background(SCENE_BACKGROUND, rng)
     camera = wall_camera(*CANVAS)
-    run = FinishedRun(Path("."), CANVAS[0], CANVAS[1], {0: camera}, background, people, body_model, RENDER)
+    run = FinishedRun(Path("."), CANVAS[0], CANVAS[1], {0: camera}, background, people, BodyModels(body_model), RENDER)
     session = ViewSession(run, view, torch.device("cpu"))
     total = SCENE_PEOPLE * PERSON_GAUSSIANS + SCENE_BACKGROUND
     print(f"viewer renders, {SCENE_PEOPLE} people x {PERSON_GAUSSIANS:,} + {SCENE_BACKGROUND:,} background = "

@@ -31,3 +31,28 @@ def test_a_missing_model_file_says_what_to_give(tmp_path):
     set_body_model(scene, "free")
     with pytest.raises(GlimpseError, match=r"body.model_path: no body model file at /nowhere/SMPL_NEUTRAL.pkl"):
         prepare_run(scene, tmp_path / "out", "body.model_path=/nowhere/SMPL_NEUTRAL.pkl")
+
+
+def test_a_persons_own_model_file_is_checked_like_the_shared_one(tmp_path):
+    scene = tmp_path / "scene"
+    build_valid_scene(scene)
+    set_body_model(scene, "free")
+    free = "glimpse/body/assets/free_body.npz"
+    prepare_run(scene, tmp_path / "out", f"body.person_model_paths=[p0={free}]")  # the same kind: fine
+    with pytest.raises(GlimpseError, match=r"body.person_model_paths \(p1\): no body model file at /nowhere/SMPL_MALE"):
+        prepare_run(scene, tmp_path / "out", "body.person_model_paths=[p1=/nowhere/SMPL_MALE.pkl]")
+    with pytest.raises(GlimpseError, match=r"'p0' is not PID=PATH"):
+        prepare_run(scene, tmp_path / "out", "body.person_model_paths=[p0]")
+    with pytest.raises(GlimpseError, match=r"person 'p0' is given twice"):
+        prepare_run(scene, tmp_path / "out", f"body.person_model_paths=[p0={free},p0={free}]")
+
+
+def test_a_persons_own_model_of_another_kind_than_the_scenes_parameters_is_refused(tmp_path):
+    from tests.body_files import write_random_smpl_pkl
+
+    scene = tmp_path / "scene"
+    build_valid_scene(scene)
+    set_body_model(scene, "free")
+    smpl = write_random_smpl_pkl(tmp_path / "SMPL_MALE.pkl", seed=3, chumpy_style=False)
+    with pytest.raises(GlimpseError, match=r"body_model is 'free', but body.person_model_paths \(p1\) .* is a 'smpl'"):
+        prepare_run(scene, tmp_path / "out", f"body.person_model_paths=[p1={smpl}]")

@@ -8,6 +8,7 @@ import torch
 
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints
@@ -160,7 +161,7 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
     raw = load_pipeline_yaml()["02_smpl_fit"]
     centre = cameras[0].centre
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
-    fits, floor = Fitter(scene, model, cameras, config, "metres").fit_people(list(scene.humans.values()))
+    fits, floor = Fitter(scene, BodyModels(model), cameras, config, "metres").fit_people(list(scene.humans.values()))
     assert floor["applied"], floor
     assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
     ratios = []

@@ -1,7 +1,7 @@
 """Hi4D import on a miniature copy of a sequence's layout (meta.npz with start, end and genders, the 8-camera
 rgb_cameras.npz with distortion and a skew term, images/<camera>/<frame:06d>.jpg from frame 9, per-person masks
 with 0/255 values, smpl/<frame>.npz for both people): cameras, bodies and masks must agree with the source; a
-pair of different genders is refused with the reason."""
+pair of a man and a woman gets each person's SMPL model, and the pipeline's first stages run on it."""
 
 from __future__ import annotations
 
@@ -98,11 +98,35 @@ def test_cameras_bodies_and_masks_agree_with_the_source(imported):
     assert scene.overrides["body"]["model_path"] == str(female.resolve())
 
 
-def test_a_pair_of_different_genders_is_refused_with_the_reason(imported, tmp_path):
+def test_a_man_and_a_woman_each_get_their_own_smpl_model(imported, tmp_path):
+    import pickle
+
+    from tests.body_files import random_smpl_arrays
+    from tests.stage_helpers import read_json, run
+
     root, _, female, _ = imported
-    with pytest.raises(GlimpseError, match="male and female; each needs SMPL's model of their gender"):
+    with pytest.raises(GlimpseError, match=r"person 0 \(male\) are parameters of SMPL's male model; give it with "
+                                           r"--body-model male="):
         import_dataset("hi4d", root, tmp_path / "s", ImportOptions(sequence="pair01/hug01",
                                                                    body_models={"female": female}))
+    arrays = random_smpl_arrays(5)  # a male model sharing the female one's topology, as SMPL's do
+    with open(female, "rb") as handle:
+        arrays["f"] = pickle.load(handle)["f"]
+    male = tmp_path / "SMPL_MALE.pkl"
+    with open(male, "wb") as handle:
+        pickle.dump(arrays, handle, protocol=2)
+    scene = load_scene(import_dataset("hi4d", root, tmp_path / "mixed", ImportOptions(
+        sequence="pair01/hug01", frames=parse_span("10:12"), body_models={"female": female, "male": male})))
+    assert scene.overrides["body"] == {"model_path": str(male.resolve()),
+                                       "person_model_paths": [f"p1={female.resolve()}"]}
+    run("01_sfm", scene.root, tmp_path / "out")
+    out = run("02_smpl_fit", scene.root, tmp_path / "out")  # each person posed by their own model in the overlay
+    recorded = read_json(out.parent / ".params" / "02_smpl_fit.json")["params"]["body"]
+    assert recorded["person_model_paths"] == [f"p1={female.resolve()}"] and (out / "overlay.mp4").is_file()
+
+
+def test_an_unknown_camera_is_refused(imported, tmp_path):
+    root, _, female, _ = imported
     with pytest.raises(GlimpseError, match="no camera 5"):
         import_dataset("hi4d", root / "pair00" / "dance00", tmp_path / "s",
                        ImportOptions(cameras=("5",), body_models={"female": female}))

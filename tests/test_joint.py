@@ -17,6 +17,7 @@ from PIL import Image
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.lbs import batch_rodrigues
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams, read_body_params
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
@@ -182,14 +183,14 @@ def test_training_beats_the_untrained_bodies_on_held_out_views(tiny, body_model)
     """Humans-only PSNR on the held-out cameras (mesh-rendered ground truth) against the same bodies grey."""
     scene, run_dir = tiny
     trained = read_json(run_dir / "07_eval" / "metrics.json")["tables"]["humans"]["rows"][0]
-    people = load_trained_people(run_dir / "06_joint_opt" / "humans", body_model)
+    people = load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModels(body_model))
     grey = [initial_person(p.pid, body_model, p.body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0) for p in people]
     views = heldout_views(load_scene(scene), True)
     background = GaussianModel.from_splats(read_gaussians_ply(run_dir / "06_joint_opt" / "background.ply")[0])
     visibility = {p.pid: BodyVisibility.read(run_dir / "06_joint_opt" / "humans" / p.pid / "visibility.npz")
                   for p in people}
     baseline = score_views(ViewSet("held-out", "test", views), grey, background, RENDER, LPIPS("alex"),
-                           torch.device("cpu"), PosedBodies(grey, visibility, body_model),
+                           torch.device("cpu"), PosedBodies(grey, visibility, BodyModels(body_model)),
                            [np.full(3, 0.5)] * len(grey)).rows["humans"][0]
     assert trained["psnr"] > baseline.psnr + 1.0
 
@@ -448,10 +449,11 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
         mesh = trimesh.load(tmp_path / "export" / "people" / pid / "mesh_000003.glb", force="mesh", process=False)
         body = read_body_params(tmp_path / "export" / "people" / pid / "body.npz")
         row = list(body.frame_ids).index(3)
-        posed = finished.body_model(body.betas[None], body.global_orient[row:row + 1], body.body_pose[row:row + 1],
-                                    body.transl[row:row + 1], [body.scale]).vertices[0].numpy()
+        posed = finished.body_models[pid](body.betas[None], body.global_orient[row:row + 1],
+                                          body.body_pose[row:row + 1], body.transl[row:row + 1],
+                                          [body.scale]).vertices[0].numpy()
         assert np.abs(np.asarray(mesh.vertices) - posed).max() < 1e-5
-        assert len(mesh.faces) == len(finished.body_model.faces)
+        assert len(mesh.faces) == len(finished.body_models.faces)
         colours = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(float)
         assert colours.std(axis=0).min() > 5  # coloured by the Gaussians, not one flat colour
     model = pycolmap.Reconstruction(str(tmp_path / "export" / "cameras"))  # COLMAP's own reader
@@ -556,14 +558,15 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
     views = [JointView(0, camera, pixels.get)]
 
     pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3), 48, 64)
-    visibility = body_visibility(body_model, {"p0": body}, {0: pinhole}, 48, 64, {}, JOINT.visibility)
+    visibility = body_visibility(BodyModels(body_model), {"p0": body}, {0: pinhole}, 48, 64, {}, JOINT.visibility)
     surface = replace(SURFACE, views_per_person=2, start_at=1000, refresh_every=2500)  # from iteration 2, every 5
 
     def trainer() -> JointTrainer:
         person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 1)
         background = GaussianModel.from_points(torch.tensor([[0.0, 0.0, 10.0]]), torch.full((1, 3), 0.3),
                                                torch.tensor([5.0]), 0.5, 1)
-        prior = make_prior("surface", PriorContext([person], visibility, body_model, RENDER, 0, config.scaled),
+        prior = make_prior("surface", PriorContext([person], visibility, BodyModels(body_model), RENDER, 0,
+                                                   config.scaled),
                            surface)
         return JointTrainer(background, [person], views, config, RENDER, prior, None, 0,
                             tmp_path / "checkpoint.pt", "key")

@@ -74,7 +74,8 @@ def test_reruns_exactly_the_changed_stage_and_its_descendants(setup):
     make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1")
     assert sorted(ran(log, n)) == ["04_bg_pretrain", "06_joint_opt", "07_eval"]
     params = json.loads((out / "tiny" / "07_eval" / "params.json").read_text())
-    assert params["body"] == {"model_path": "glimpse/body/assets/free_body.npz"}  # what stage 07 reads of body
+    assert params["body"] == {"model_path": "glimpse/body/assets/free_body.npz",  # what stage 07 reads of body
+                              "person_model_paths": []}
     n = len(ran(log, 0))
     make(args, env, "PARAMS=04_bg_pretrain.knob=2 body.skinning.grid_resolution=32 render.sh_degree=1 "
                     "compute.seed=5")

@@ -15,6 +15,7 @@ from scipy.sparse import coo_matrix
 
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.body.symmetry import mirror_vertex_map
 from glimpse.cameras.model import PinholeCamera
@@ -168,22 +169,22 @@ def test_a_camera_sees_the_front_not_the_back_and_people_and_occluders_hide(body
     template = body_model(body.betas, body.global_orient, body.body_pose).vertices[0].double().numpy()
     facing = vertex_normals(template, body_model.faces.numpy())[:, 2]  # towards the camera at azimuth 0
     torso = (np.abs(template[:, 0]) < 0.12) & (template[:, 1] > 0.0) & (template[:, 1] < 0.4)  # no arm in front
-    front = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)["p0"]
+    front = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)["p0"]
     assert 0.25 < front.seen.mean() < 0.6
     assert front.seen[torso & (facing > 0.5)].mean() > 0.95 and not front.seen[facing < -0.2].any()
-    back = body_visibility(body_model, {"p0": body}, {0: _camera(180.0)}, SIZE, SIZE, {}, VISIBILITY)["p0"]
+    back = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(180.0)}, SIZE, SIZE, {}, VISIBILITY)["p0"]
     assert (front.seen & back.seen).mean() < 0.05  # only the sides, within the tolerances
     assert front.best_px_per_m[front.seen].min() > 0 and (front.best_cosine[~front.seen] == 0).all()
     blocker = _standing(transl=(0.0, 0.0, 1.0))  # a person between the camera and p0
-    hidden = body_visibility(body_model, {"p0": body, "p1": blocker}, {0: _camera(0.0)}, SIZE, SIZE, {},
+    hidden = body_visibility(BodyModels(body_model), {"p0": body, "p1": blocker}, {0: _camera(0.0)}, SIZE, SIZE, {},
                              VISIBILITY)
     assert hidden["p0"].seen.mean() < 0.25 * front.seen.mean() and hidden["p1"].seen.mean() > 0.25
-    walled = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE,
+    walled = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE,
                              {0: {"p0": np.zeros((SIZE, SIZE), bool)}}, VISIBILITY)["p0"]
     assert not walled.seen.any()  # a mask without the person: a table (or anything) hides it
     upper = np.zeros((SIZE, SIZE), bool)
     upper[: SIZE // 2] = True  # image rows above the middle: the person is visible only there
-    half = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {0: {"p0": upper}},
+    half = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {0: {"p0": upper}},
                            VISIBILITY)["p0"]
     assert (half.seen <= front.seen).all() and 0.3 < half.seen.sum() / front.seen.sum() < 0.7
     assert not half.seen[template[:, 1] < template[:, 1].min() + 0.5].any()  # the legs were behind it
@@ -213,9 +214,9 @@ def test_orbit_cameras_look_at_the_centre_with_the_body_up_and_its_left_on_the_r
 
 def test_never_seen_pixels_cover_the_back_seen_from_behind_and_nothing_from_the_front(body_model):
     body = _standing()
-    visibility = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)
+    visibility = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)
     person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 0)
-    bodies = PosedBodies([person], visibility, body_model)
+    bodies = PosedBodies([person], visibility, BodyModels(body_model))
 
     def view(azimuth: float) -> ScoredView:
         return ScoredView("v", 0, _camera(azimuth), None, None, {})
@@ -248,9 +249,9 @@ def test_a_person_covering_their_body_has_no_holes_and_a_faded_half_shows_as_hol
 def _prior_and_person(body_model, config: SurfacePriorConfig = SURFACE, views: int = 4):
     body = _standing()
     person = initial_person("p0", body_model, body, 30.0, BODY.skinning, 0.5, 0.9, 3, 1)
-    visibility = body_visibility(body_model, {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)
+    visibility = body_visibility(BodyModels(body_model), {"p0": body}, {0: _camera(0.0)}, SIZE, SIZE, {}, VISIBILITY)
     config = replace(config, start_at=1, refresh_every=1000, views_per_person=views)
-    prior = make_prior("surface", PriorContext([person], visibility, body_model, RENDER, 0, lambda i: i),
+    prior = make_prior("surface", PriorContext([person], visibility, BodyModels(body_model), RENDER, 0, lambda i: i),
                        config)
     return prior, person, visibility["p0"].seen
 
@@ -310,12 +311,12 @@ def test_the_silhouette_term_fills_holes_and_trims_spikes(body_model):
 def test_no_term_before_start_at_and_the_state_round_trips(body_model):
     _, person, _ = _prior_and_person(body_model)
     late = make_prior("surface", PriorContext([person], {"p0": BodyVisibility.empty(body_model.num_vertices)},
-                                              body_model, RENDER, 0, lambda i: i),
+                                              BodyModels(body_model), RENDER, 0, lambda i: i),
                       replace(SURFACE, start_at=5, views_per_person=1))
     assert late.losses(4, [person]) == {} and late.losses(5, [person])
     state = late.state_dict()
     other = make_prior("surface", PriorContext([person], {"p0": BodyVisibility.empty(body_model.num_vertices)},
-                                               body_model, RENDER, 0, lambda i: i),
+                                               BodyModels(body_model), RENDER, 0, lambda i: i),
                        replace(SURFACE, start_at=5, views_per_person=1))
     other.load_state_dict(state)
     assert torch.equal(other.people["p0"].vertex_colours, late.people["p0"].vertex_colours)

@@ -19,6 +19,7 @@ import torch
 from glimpse.body.config import BodyConfig, resolve_model_path
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.cameras.model import render_camera
 from glimpse.cameras.orbit import orbit_camera
 from glimpse.config import config_from_mapping, load_pipeline_yaml
@@ -378,7 +379,7 @@ def _sds_prior(tmp_path, body_model, combine: str = "separate_steps", preview_di
         save_identity(new_identity(loaded, f"<person-{pid}>"), loaded,
                       tmp_path / "05" / pid / "identity" / "identity.safetensors")
     visibility = {p.pid: BodyVisibility.empty(body_model.num_vertices) for p in people}
-    context = PriorContext(people, visibility, body_model, RenderConfig("auto", 1, False), 0, lambda i: i,
+    context = PriorContext(people, visibility, BodyModels(body_model), RenderConfig("auto", 1, False), 0, lambda i: i,
                            tmp_path / "05", preview_dir)
     return make_prior("sds", context, config), people
 

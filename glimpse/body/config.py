@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.errors import GlimpseError
+from glimpse.errors import ConfigError, GlimpseError
 
 
 @dataclass(frozen=True)
@@ -23,23 +23,51 @@ class SkinningConfig:
 @dataclass(frozen=True)
 class BodyConfig:
     model_path: str  # SMPL-format file: repository-relative or absolute
+    person_model_paths: list[str]  # "PID=PATH": that person's own model file (gendered SMPL)
     canonical_hip_angle_deg: float  # Da-pose: hips rotated +-angle about z
     skinning: SkinningConfig
 
+    def __post_init__(self) -> None:
+        person_model_files(self)  # malformed entries are refused when the section is read
 
-def resolve_model_path(config: BodyConfig) -> Path:
-    """The model file as an absolute path (relative paths are relative to the repository)."""
+
+def _existing(path_text: str, parameter: str) -> Path:
+    """A model file as an absolute path (relative paths are relative to the repository); missing: an error."""
     from glimpse.config import REPO_ROOT
 
-    path = Path(config.model_path).expanduser()
+    path = Path(path_text).expanduser()
     path = path if path.is_absolute() else REPO_ROOT / path
     if not path.is_file():
         raise GlimpseError(
-            f"body.model_path: no body model file at {path}. Give the free model "
+            f"{parameter}: no body model file at {path}. Give the free model "
             "(glimpse/body/assets/free_body.npz) or your own SMPL_NEUTRAL.pkl/.npz "
             '(PARAMS="body.model_path=/path/to/SMPL_NEUTRAL.pkl" or in pipeline.yaml)'
         )
     return path
+
+
+def resolve_model_path(config: BodyConfig) -> Path:
+    """The shared model file as an absolute path (relative paths are relative to the repository)."""
+    return _existing(config.model_path, "body.model_path")
+
+
+def person_model_files(config: BodyConfig) -> dict[str, str]:
+    """``body.person_model_paths`` as pid -> path text (not checked on disk); malformed entries are errors."""
+    files: dict[str, str] = {}
+    for entry in config.person_model_paths:
+        pid, sep, path = entry.partition("=")
+        if not sep or not pid.strip() or not path.strip():
+            raise ConfigError(f"body.person_model_paths: {entry!r} is not PID=PATH (e.g. p0=/smpl/SMPL_MALE.pkl)")
+        if pid.strip() in files:
+            raise ConfigError(f"body.person_model_paths: person {pid.strip()!r} is given twice")
+        files[pid.strip()] = path.strip()
+    return files
+
+
+def resolve_person_model_paths(config: BodyConfig) -> dict[str, Path]:
+    """pid -> absolute model file for each person ``body.person_model_paths`` names (each must exist)."""
+    return {pid: _existing(path, f"body.person_model_paths ({pid})")
+            for pid, path in person_model_files(config).items()}
 
 
 def peek_body_model_kind(path: Path) -> str:
@@ -52,12 +80,15 @@ def peek_body_model_kind(path: Path) -> str:
 
 
 def check_scene_body_model(scene_body_model: str, config: BodyConfig, scene_yaml: str) -> None:
-    """Refuse a scene whose smpl.npz parameters belong to another body model than the one in use."""
-    path = resolve_model_path(config)
-    kind = peek_body_model_kind(path)
-    if kind != scene_body_model:
-        raise GlimpseError(
-            f"{scene_yaml}: body_model is {scene_body_model!r}, but body.model_path ({path}) is a {kind!r} model. "
-            f"Parameters of one model do not fit the other: set body.model_path to a {scene_body_model!r} model file "
-            f"(free: glimpse/body/assets/free_body.npz; smpl: your SMPL_NEUTRAL.pkl) or fix scene.yaml"
-        )
+    """Refuse a scene whose smpl.npz parameters belong to another body model than the ones in use (the shared
+    file and every person's own)."""
+    files = {"body.model_path": resolve_model_path(config)}
+    files.update({f"body.person_model_paths ({pid})": path for pid, path in resolve_person_model_paths(config).items()})
+    for parameter, path in files.items():
+        kind = peek_body_model_kind(path)
+        if kind != scene_body_model:
+            raise GlimpseError(
+                f"{scene_yaml}: body_model is {scene_body_model!r}, but {parameter} ({path}) is a {kind!r} model. "
+                f"Parameters of one model do not fit the other: set it to a {scene_body_model!r} model file "
+                f"(free: glimpse/body/assets/free_body.npz; smpl: your SMPL_NEUTRAL.pkl) or fix scene.yaml"
+            )

@@ -20,6 +20,7 @@ import torch
 
 from glimpse.body.keypoints import KeypointMap, keypoint_map
 from glimpse.body.model import NUM_JOINTS, BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.crops.box import (
@@ -56,7 +57,7 @@ MASK_LEVELS = 255  # the soft mask is written as 0-255
 @dataclass(frozen=True)
 class CropsInputs:
     pids: list[str]  # sorted; a person's index here seeds its background colours
-    model: BodyModel
+    models: BodyModels  # each person's body model
     cameras: dict[int, PinholeCamera]  # stage 01's, per frame id
     bodies: dict[str, BodyParams]  # stage 02's, per person
     frames_dir: Path  # stage 01's frames/
@@ -160,7 +161,8 @@ def person_crops(inputs: CropsInputs, config: CropsConfig, seed: int, pid: str, 
     chosen = evenly_spaced(usable, config.max_crops)
     row_of = {int(f): k for k, f in enumerate(body.frame_ids)}
     rows = [row_of[fid] for fid in chosen]
-    keypoints, joints = posed_keypoints(inputs.model, keypoint_map(KEYPOINT_LAYOUT, inputs.model.data), body, rows)
+    model = inputs.models[pid]
+    keypoints, joints = posed_keypoints(model, keypoint_map(KEYPOINT_LAYOUT, model.data), body, rows)
     frames = frame_files(inputs.frames_dir)
     index = inputs.pids.index(pid)
     entries = []

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.eval.views import ScoredView
 from glimpse.humans.person import PersonGaussians
 from glimpse.humans.visibility import BodyVisibility, posed_vertices
@@ -37,10 +37,10 @@ class PosedBodies:
     """Every person's fitted body in every frame they have (refined poses), and which triangles no input
     frame saw (none of their three vertices), for rasterizing scored views."""
 
-    def __init__(self, people: list[PersonGaussians], visibility: dict[str, BodyVisibility], body_model: BodyModel):
-        self.faces = body_model.faces.cpu().numpy()
+    def __init__(self, people: list[PersonGaussians], visibility: dict[str, BodyVisibility], body_models: BodyModels):
+        self.faces = body_models.faces.cpu().numpy()
         self.people = people
-        self.vertices = [posed_vertices(body_model, p.refined_body()) for p in people]  # [T, V, 3] each
+        self.vertices = [posed_vertices(body_models[p.pid], p.refined_body()) for p in people]  # [T, V, 3] each
         self.unseen_faces = [~visibility[p.pid].seen[self.faces].any(axis=1) for p in people]  # [F] each
 
     def in_view(self, view: ScoredView) -> ViewBodies:

@@ -137,7 +137,7 @@ def write_render_set(run: FinishedRun, config: RenderSetConfig, heldout: list[Sc
     person = next(p for p in run.people if p.pid == chosen)
     if person.in_frame(frozen):
         motion = motion_from_spec(config.motion, fps, config.motion_seconds)
-        driven = retarget(motion, person.body, frozen, run.body_model, np.arange(len(motion)))
+        driven = retarget(motion, person.body, frozen, run.body_models[person.pid], np.arange(len(motion)))
         write_mp4(out / f"motion_{chosen}.mp4", render_video(run, [(run.cameras[frozen], frozen)] * len(motion),
                                                              Edits(driven={chosen: driven}), device), fps)
         wrote(f"motion_{chosen}.mp4", f"{chosen} driven by {config.motion} from frame {frozen}, scene frozen")

@@ -78,7 +78,7 @@ def _write_export(run: FinishedRun, frame_ids: list[int], sh_degree: int | None,
 
     (tmp / "people").mkdir()
     scenes, people_doc = [], {}
-    faces = run.body_model.faces.cpu().numpy()
+    faces = run.body_models.faces.cpu().numpy()
     colours = {person.pid: person_vertex_colours(person) for person in run.people}
     for person in run.people:
         (tmp / "people" / person.pid).mkdir()
@@ -94,8 +94,8 @@ def _write_export(run: FinishedRun, frame_ids: list[int], sh_degree: int | None,
             if person.in_frame(frame_id):
                 write_gaussians_ply(tmp / "people" / person.pid / f"posed_{name}.ply",
                                     written(posed_person_splats(person, frame_id)), {"frame": name, "up": up})
-                write_mesh_glb(tmp / "people" / person.pid / f"mesh_{name}.glb",
-                               posed_vertices(run.body_model, person, frame_id) @ turn.T, faces, colours[person.pid])
+                vertices = posed_vertices(run.body_models[person.pid], person, frame_id) @ turn.T
+                write_mesh_glb(tmp / "people" / person.pid / f"mesh_{name}.glb", vertices, faces, colours[person.pid])
                 people_doc[person.pid]["files"] += [f"posed_{name}.ply", f"mesh_{name}.glb"]
     cameras = {fid: replace(camera, R=camera.R @ turn.T) for fid, camera in run.cameras.items()}
     write_colmap_text(tmp / "cameras", run.width, run.height, cameras, ".png")

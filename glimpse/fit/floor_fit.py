@@ -23,7 +23,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from glimpse.body.keypoints import landmark_map
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.config import FitConfig, GroundConfig
@@ -65,19 +65,24 @@ class _Feet:
     contact: np.ndarray  # [T, S] bool
 
 
-def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: dict[int, PinholeCamera],
+def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras: dict[int, PinholeCamera],
                           config: FitConfig, fps: float) -> dict:
     """Put the 2D-fitted people of ``pending`` on one floor and refit them (updating their outcomes);
-    ``fps`` is the scene's frame rate. Returns the floor report (``applied`` false with the reason when
-    the step does not apply)."""
+    ``models`` gives each person's body model, ``fps`` is the scene's frame rate. Returns the floor report
+    (``applied`` false with the reason when the step does not apply)."""
     g = config.ground
     centres = np.stack([cameras[f].centre for f in sorted(cameras)])
     reason = _why_not(pending, centres, g)
     if reason is not None:
         return {"applied": False, "reason": reason}
     centre = centres[0]
-    soles_body = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
-    feet = [_feet(p, soles_body, centre, config, fps) for p in pending]
+    soles: dict[int, KeypointBody] = {}  # per distinct body model
+    for p in pending:
+        model = models[p.person.pid]
+        if id(model) not in soles:
+            soles[id(model)] = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
+    soles_bodies = [soles[id(models[p.person.pid])] for p in pending]
+    feet = [_feet(p, body, centre, config, fps) for p, body in zip(pending, soles_bodies)]
     up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
     if np.linalg.norm(up_hint) <= 0:
         return {"applied": False, "reason": "nobody stands upright in any frame (no up to start the floor from)"}
@@ -97,7 +102,7 @@ def place_on_common_floor(pending: list[PendingFit], model: BodyModel, cameras: 
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
     floor = Floor(normal, centre, camera_height)
-    for p, f, height, factor in zip(pending, feet, heights, factors):
+    for p, f, height, factor, soles_body in zip(pending, feet, heights, factors, soles_bodies):
         p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from glimpse.body.keypoints import keypoint_map
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.motion import interpolate_pose_sequence
 from glimpse.body.params import BodyParams, read_scene_smpl
 from glimpse.cameras.align import rotation_between
@@ -50,14 +50,16 @@ class PersonFit:
 
 
 class Fitter:
-    """What every person's fit shares: the body model, its keypoint bodies, the priors, the cameras."""
+    """What every person's fit shares: the body models (one per person, usually the same), their keypoint
+    bodies, the priors, the cameras."""
 
-    def __init__(self, scene: Scene, model: BodyModel, cameras: dict[int, PinholeCamera], config: FitConfig,
+    def __init__(self, scene: Scene, models: BodyModels, cameras: dict[int, PinholeCamera], config: FitConfig,
                  units: str):
-        self.scene, self.model, self.cameras, self.config = scene, model, cameras, config
+        self.scene, self.models, self.cameras, self.config = scene, models, cameras, config
+        self.dtype = models.default.dtype
         self.fit_scale = config.fit_scale == "always" or (config.fit_scale == "auto" and units == "sfm")
         self.undistorter = scene_undistorter(scene)
-        self._bodies: dict[str, KeypointBody] = {}
+        self._bodies: dict[tuple[str, int], KeypointBody] = {}
         self._prior: PosePrior | PartedPosePrior | None = None
 
     def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
@@ -72,10 +74,13 @@ class Fitter:
         values[seen, :2] = self.undistorter.points(values[seen, :2])
         return kp2.frame_ids, kp2.layout, values
 
-    def keypoint_body(self, layout: str) -> KeypointBody:
-        if layout not in self._bodies:
-            self._bodies[layout] = KeypointBody(self.model, keypoint_map(layout, self.model.data))
-        return self._bodies[layout]
+    def keypoint_body(self, layout: str, pid: str) -> KeypointBody:
+        """Person ``pid``'s body model with the keypoints of ``layout`` (one per model and layout)."""
+        model = self.models[pid]
+        key = (layout, id(model))
+        if key not in self._bodies:
+            self._bodies[key] = KeypointBody(model, keypoint_map(layout, model.data))
+        return self._bodies[key]
 
     @property
     def prior(self) -> PosePrior | PartedPosePrior:
@@ -83,9 +88,9 @@ class Fitter:
             c = self.config
             if c.pose_prior_mixture and c.pose_prior_mixture_joints:
                 self._prior = build_parted_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg,
-                                                      tuple(c.pose_prior_mixture_joints), self.model.dtype)
+                                                      tuple(c.pose_prior_mixture_joints), self.dtype)
             else:
-                self._prior = build_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg, self.model.dtype,
+                self._prior = build_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg, self.dtype,
                                                c.pose_prior_mixture)
         return self._prior
 
@@ -119,7 +124,7 @@ class Fitter:
         when 02_smpl_fit.ground allows; ``progress`` wraps the per-person loop (tqdm). Returns the fits and
         the floor's report."""
         pending = [self.start(person) for person in progress(people)]
-        floor = place_on_common_floor(pending, self.model, self.cameras, self.config, self.scene.fps)
+        floor = place_on_common_floor(pending, self.models, self.cameras, self.config, self.scene.fps)
         return [self.finish(p) for p in pending], floor
 
     def start(self, person: HumanInputs) -> PendingFit:
@@ -134,8 +139,8 @@ class Fitter:
             return PendingFit(person, mode, seconds=time.perf_counter() - started, params=params)
         who, file = f"person {person.pid}", f"humans/{person.pid}/{KEYPOINT_FILES[mode]}"
         track, layout = self._track(person, mode)
-        body = self.keypoint_body(layout)
-        energy = FitEnergy(body, track, self.prior, joint_limits(self.model.dtype), self.config.weights,
+        body = self.keypoint_body(layout, person.pid)
+        energy = FitEnergy(body, track, self.prior, joint_limits(self.dtype), self.config.weights,
                            self.config.max_interpolated_gap)
         c = self.config
         if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
@@ -183,7 +188,8 @@ class Fitter:
             if path is None:
                 continue
             frame_ids, layout, values = self.observed(person, key)
-            predicted = dict(zip(params.frame_ids.tolist(), body_keypoints(self.model, params, layout)))
+            predicted = dict(zip(params.frame_ids.tolist(), body_keypoints(self.models[person.pid], params,
+                                                                            layout)))
             if key == "keypoints3d":
                 residuals = residuals_3d(predicted, frame_ids, values, min_confidence)
             else:
@@ -207,7 +213,7 @@ class Fitter:
 
     def _track(self, person: HumanInputs, mode: str) -> tuple[Track, str]:
         """The person's confident keypoints on the frames with a camera and enough of them."""
-        c, dtype = self.config, self.model.dtype
+        c, dtype = self.config, self.dtype
         all_ids, layout, values = self.observed(person, mode)
         confidence = np.where(values[..., -1] >= c.keypoint_min_confidence, values[..., -1], 0.0)
         keep = np.isin(all_ids, list(self.cameras)) & ((confidence > 0).sum(1) >= c.min_keypoints)
@@ -243,7 +249,7 @@ class Fitter:
             return initial_state_2d(body, track, self.prior.mean)
         rows = np.searchsorted(track3d.frame_ids.numpy()[common], track.frame_ids.numpy()).clip(0, common.sum() - 1)
         subset = Track(track.frame_ids, track.times_s, track3d.points[common][rows], track3d.weight[common][rows])
-        return initial_state_3d(self.keypoint_body(layout), subset, self.prior.mean, self.fit_scale)
+        return initial_state_3d(self.keypoint_body(layout, person.pid), subset, self.prior.mean, self.fit_scale)
 
     def _with_gaps_filled(self, outcome: FitOutcome, fitted_ids: np.ndarray) -> BodyParams:
         state = outcome.state

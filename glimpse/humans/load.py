@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import read_body_params
 from glimpse.body.skinning import SkinWeightGrid
 from glimpse.errors import GlimpseError
@@ -15,10 +15,10 @@ from glimpse.gaussians.ply import read_gaussians_ply
 from glimpse.humans.person import PersonGaussians, build_rig
 
 
-def load_trained_people(humans_dir: Path, body_model: BodyModel) -> list[PersonGaussians]:
+def load_trained_people(humans_dir: Path, body_models: BodyModels) -> list[PersonGaussians]:
     """Every person under ``humans_dir`` (stage 06's ``humans/``), in pid order, posed by the refined poses
-    of body.npz (pose offsets start at zero), frozen for rendering (PersonGaussians.freeze). The Da-pose
-    angle is the one stage 06 trained with."""
+    of body.npz (pose offsets start at zero), frozen for rendering (PersonGaussians.freeze); ``body_models``
+    gives each person's body model. The Da-pose angle is the one stage 06 trained with."""
     people: list[PersonGaussians] = []
     if not humans_dir.is_dir():  # stage 06 trained nobody (no person had a body in a frame with a camera)
         return people
@@ -29,6 +29,6 @@ def load_trained_people(humans_dir: Path, body_model: BodyModel) -> list[PersonG
         with np.load(folder / "skinning.npz", allow_pickle=False) as data:
             grid = SkinWeightGrid.from_npz_dict(dict(data), str(folder / "skinning.npz"))
         body = read_body_params(folder / "body.npz")
-        rig = build_rig(body_model, body.betas, float(metadata["canonical_hip_angle_deg"]))
+        rig = build_rig(body_models[folder.name], body.betas, float(metadata["canonical_hip_angle_deg"]))
         people.append(PersonGaussians(folder.name, GaussianModel.from_splats(splats), grid, rig, body).freeze())
     return people

@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
@@ -128,19 +129,20 @@ def posed_vertices(body_model: BodyModel, params: BodyParams, rows: slice = slic
     return out.vertices.double().numpy()
 
 
-def body_visibility(body_model: BodyModel, bodies: dict[str, BodyParams], cameras: dict[int, PinholeCamera],
+def body_visibility(models: BodyModels, bodies: dict[str, BodyParams], cameras: dict[int, PinholeCamera],
                     width: int, height: int, visible: Mapping[int, dict[str, np.ndarray]], config: VisibilityConfig
                     ) -> dict[str, BodyVisibility]:
-    """Every person's vertex visibility over the frames with a camera; ``visible[frame id][pid]`` [H, W] bool:
-    where that person is visible in that frame (stage 03's masks; no entry: no mask, geometry alone). ``visible``
-    may read each frame's masks when asked: frames are visited once, in order."""
-    faces = body_model.faces.numpy()
-    vertex_count = body_model.num_vertices
+    """Every person's vertex visibility over the frames with a camera (``models``: each person's body model);
+    ``visible[frame id][pid]`` [H, W] bool: where that person is visible in that frame (stage 03's masks; no
+    entry: no mask, geometry alone). ``visible`` may read each frame's masks when asked: frames are visited
+    once, in order."""
+    faces = models.faces.numpy()
+    vertex_count = models.default.num_vertices
     records = {pid: BodyVisibility.empty(vertex_count) for pid in bodies}
     rows = {pid: {int(f): r for r, f in enumerate(params.frame_ids)} for pid, params in bodies.items()}
     for fid in sorted(cameras):  # one frame at a time: a long video's bodies and masks are never all held
         present = [pid for pid in sorted(bodies) if fid in rows[pid]]
-        posed = [posed_vertices(body_model, bodies[pid], slice(rows[pid][fid], rows[pid][fid] + 1))[0]
+        posed = [posed_vertices(models[pid], bodies[pid], slice(rows[pid][fid], rows[pid][fid] + 1))[0]
                  for pid in present]
         seen = frame_visibility(posed, [float(bodies[pid].scale) for pid in present], faces, cameras[fid], width,
                                 height, [visible.get(fid, {}).get(pid) for pid in present], config)

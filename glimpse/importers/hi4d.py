@@ -12,9 +12,10 @@ and the viewer that script uses):
     smpl/<frame:06d>.npz       both people: "betas" (2, 10), "global_orient" (2, 3), "body_pose" (2, 69),
                                "transl" (2, 3), posed as smplx does, metres
 
-Each person's SMPL is of their gender; a run uses one body model file today, so a pair of different genders
-is refused with that reason. A skew term in K is dropped (as MultiPly does): the scene format's cameras have
-none.
+Each person's SMPL is of their gender: the scene's overrides name each person's model file
+(``body.person_model_paths``; the first person's is also ``body.model_path``), so a pair of a man and a
+woman runs with SMPL's male and female models. A skew term in K is dropped (as MultiPly does): the scene
+format's cameras have none.
 """
 
 from __future__ import annotations
@@ -95,6 +96,14 @@ def masks_of(folder: Path, camera: str, frame: int) -> list[np.ndarray]:
     return masks
 
 
+def body_model_overrides(model_files: list[Path]) -> dict:
+    """The scene's ``body`` overrides: the first person's model as everyone's, then each person whose model
+    differs by their own file (pids p0, p1, ... in the order of ``model_files``)."""
+    shared = model_files[0]
+    own = [f"p{k}={path}" for k, path in enumerate(model_files) if path != shared]
+    return {"model_path": str(shared), **({"person_model_paths": own} if own else {})}
+
+
 def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
     """Write the scene; returns its folder."""
     folder = sequence_folder(source, options.sequence)
@@ -105,10 +114,10 @@ def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
     except (KeyError, IndexError, ValueError) as exc:
         raise GlimpseError(f"{folder / 'meta.npz'}: no start, end or genders: {exc}") from None
     name = f"{folder.parent.name}_{folder.name}"
-    if len(set(genders)) != 1:
-        raise GlimpseError(f"{name}: its two people are {' and '.join(genders)}; each needs SMPL's model of their "
-                           "gender, and a Glimpse run uses one body model file for everyone (not yet supported)")
-    model_file = smpl_model_file(options, DATASET, genders[0], f"{name}'s people's bodies")
+    if len(genders) != PEOPLE:
+        raise GlimpseError(f"{folder / 'meta.npz'}: genders names {len(genders)} people, Hi4D pairs have {PEOPLE}")
+    model_files = [smpl_model_file(options, DATASET, gender, f"{name}'s person {k} ({gender})")
+                   for k, gender in enumerate(genders)]
     cameras = read_cameras(folder)
     requested = options.cameras or (DEFAULT_INPUT, *[c for c in sorted(cameras, key=int) if c != DEFAULT_INPUT])
     unknown = [c for c in requested if c not in cameras]
@@ -120,7 +129,7 @@ def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
         raise GlimpseError(f"--frames selects none of {name}'s frames {start}..{end}")
     bodies = read_bodies(folder, frames)
     writer = SceneWriter(scene_dir, name=f"hi4d_{name}", fps=options.fps or DEFAULT_FPS, camera_motion="static",
-                         body_model="smpl", overrides={"body": {"model_path": str(model_file)}})
+                         body_model="smpl", overrides={"body": body_model_overrides(model_files)})
     source_camera, heldout = requested[0], requested[1:]
     width = height = 0
     for frame in progress(frames, desc=f"{DATASET} {name} input", unit="frame"):

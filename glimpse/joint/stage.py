@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from glimpse.body.config import BodyConfig
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera, render_camera
 from glimpse.errors import GlimpseError
@@ -115,7 +115,7 @@ class PersonMasks(Mapping[int, dict[str, np.ndarray]]):
         return len(self.inputs.cameras)
 
 
-def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, body_model: BodyModel,
+def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, body_models: BodyModels,
                    sh_degree: int, device: torch.device) -> list[PersonGaussians]:
     """One PersonGaussians per person with a body in some frame with a camera, in pid order."""
     people = []
@@ -123,14 +123,14 @@ def initial_people(inputs: JointInputs, config: JointConfig, body: BodyConfig, b
         params = inputs.bodies[pid].select(sorted(inputs.cameras))
         if len(params.frame_ids) == 0:
             continue
-        person = initial_person(pid, body_model, params, body.canonical_hip_angle_deg, body.skinning,
+        person = initial_person(pid, body_models[pid], params, body.canonical_hip_angle_deg, body.skinning,
                                 config.initial_grey, config.initial_opacity, config.initial_scale_knn, sh_degree)
         people.append(person.to(device))
     return people
 
 
 def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, body: BodyConfig,
-                body_model: BodyModel, prior_kind: str, prior_config: object | None, seed: int, device: torch.device,
+                body_models: BodyModels, prior_kind: str, prior_config: object | None, seed: int, device: torch.device,
                 frames: FrameCacheSize, work: Path, key: str, out: Path, identity_dir: Path | None = None
                 ) -> JointResult:
     """Train with the prior ``prior_kind`` (built with ``prior_config``, its section's typed config; ``identity_dir``
@@ -138,10 +138,10 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     prior writes its previews, when asked, to ``out/sds_previews/``."""
     torch.manual_seed(seed)
     views, cache = load_views(inputs, config, device, frames)
-    people = initial_people(inputs, config, body, body_model, render.sh_degree, device)
-    visibility = body_visibility(body_model, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
+    people = initial_people(inputs, config, body, body_models, render.sh_degree, device)
+    visibility = body_visibility(body_models, {p.pid: p.body for p in people}, inputs.cameras, inputs.width,
                                  inputs.height, PersonMasks(inputs, [p.pid for p in people]), config.visibility)
-    prior = make_prior(prior_kind, PriorContext(people, visibility, body_model, render, seed, config.scaled,
+    prior = make_prior(prior_kind, PriorContext(people, visibility, body_models, render, seed, config.scaled,
                                                 identity_dir, out / PREVIEWS_DIR), prior_config)
     initial_counts = {p.pid: len(p.model) for p in people}
     background = inputs.background.to(device)

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
@@ -49,7 +50,7 @@ MIN_PELVIS_DEPTH = 1e-3  # world units: a pelvis nearer than this to the camera 
 @dataclass(frozen=True)
 class MasksInputs:
     scene: Scene
-    model: BodyModel
+    models: BodyModels  # each person's body model
     cameras: dict[int, PinholeCamera]
     bodies: dict[str, BodyParams]  # stage 02's, per person
     frames_dir: Path  # stage 01's frames/
@@ -101,13 +102,13 @@ class _Frames:
 
     def __init__(self, inputs: MasksInputs):
         self.inputs, self.pids = inputs, sorted(inputs.scene.humans)
-        self.faces = inputs.model.faces.numpy()
+        self.faces = inputs.models.faces.numpy()
         self.rows = {pid: {int(f): i for i, f in enumerate(inputs.bodies[pid].frame_ids)} for pid in self.pids}
 
     def layers(self, fid: int) -> tuple[list[str], BodyLayers, np.ndarray, list[np.ndarray]]:
         """(people present, their layers, their scales, their joints [24, 3] world) in frame ``fid``."""
         present = [pid for pid in self.pids if fid in self.rows[pid]]
-        posed = [_posed(self.inputs.model, self.inputs.bodies[pid], self.rows[pid][fid]) for pid in present]
+        posed = [_posed(self.inputs.models[pid], self.inputs.bodies[pid], self.rows[pid][fid]) for pid in present]
         scene = self.inputs.scene
         layers = body_layers([v for v, _ in posed], [j[0] for _, j in posed], self.faces, self.inputs.cameras[fid],
                              scene.width, scene.height)
@@ -179,8 +180,8 @@ def static_pass(frames: _Frames, config: MasksConfig, paths: dict[int, Path], mo
                 plate_wanted: bool) -> tuple[SurfaceMotion | None, Plate | None]:
     """First pass over the frames (static camera): how the body surface under each pixel moves, per
     person, and the background plate from the frames' pixels no grown body covers."""
-    scene, model = frames.inputs.scene, frames.inputs.model
-    motion = SurfaceMotion(frames.pids, scene.height, scene.width, model.v_template.numpy()[frames.faces].mean(1)) \
+    scene, template = frames.inputs.scene, frames.inputs.models.default.v_template.numpy()  # canonical face places
+    motion = SurfaceMotion(frames.pids, scene.height, scene.width, template[frames.faces].mean(1)) \
         if motion_wanted else None
     ids = sorted(frames.inputs.cameras)
     picks = np.unique(np.linspace(0, len(ids) - 1, min(config.plate_frames, len(ids))).round().astype(int))

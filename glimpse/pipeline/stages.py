@@ -55,13 +55,13 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "02_smpl_fit",
         upstream=("01_sfm",),
-        reads=("compute.seed", "compute.threads", "body.model_path"),
+        reads=("compute.seed", "compute.threads", "body.model_path", "body.person_model_paths"),
         scene_inputs=("scene.yaml", *_PERSON_2D, *_PERSON_3D),
     ),
     StageSpec(
         "03_masks",
         upstream=("01_sfm", "02_smpl_fit"),
-        reads=("compute.seed", "compute.threads", "body.model_path"),
+        reads=("compute.seed", "compute.threads", "body.model_path", "body.person_model_paths"),
         scene_inputs=("humans/*/masks/*.png",),
     ),
     StageSpec(
@@ -73,7 +73,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "05_textual_inversion",
         upstream=("01_sfm", "02_smpl_fit", "03_masks"),
-        reads=("compute", "body.model_path", "prior.kind", "diffusion"),
+        reads=("compute", "body.model_path", "body.person_model_paths", "prior.kind", "diffusion"),
         scene_inputs=("humans/*/reference/*",),
     ),
     StageSpec(
@@ -85,7 +85,7 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec(
         "07_eval",
         upstream=("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "06_joint_opt"),
-        reads=("compute", "body.model_path", "render", "report"),
+        reads=("compute", "body.model_path", "body.person_model_paths", "render", "report"),
         scene_inputs=("eval/**/*",),
     ),
 )

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from torch import Tensor
 
-from glimpse.body.model import BodyModel
+from glimpse.body.models import BodyModels
 from glimpse.humans.person import PersonGaussians
 from glimpse.humans.visibility import BodyVisibility
 from glimpse.render.config import RenderConfig
@@ -30,12 +30,13 @@ from glimpse.render.config import RenderConfig
 @dataclass
 class PriorContext:
     """What a prior may use: every person being trained, each person's vertex visibility in the input
-    frames (by pid), the body model, the render settings, the run's seed, the schedule's scaling
-    of an iteration count (JointConfig.scaled), stage 05's outputs and a folder for previews."""
+    frames (by pid), each person's body model (one topology for all), the render settings, the run's seed,
+    the schedule's scaling of an iteration count (JointConfig.scaled), stage 05's outputs and a folder for
+    previews."""
 
     people: list[PersonGaussians]
     visibility: dict[str, BodyVisibility]
-    body_model: BodyModel
+    body_models: BodyModels
     render: RenderConfig
     seed: int
     scaled: Callable[[int], int]

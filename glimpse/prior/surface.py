@@ -81,12 +81,13 @@ class SurfacePrior(UnseenPrior):
 
     def __init__(self, context: PriorContext, config: SurfacePriorConfig):
         self.config, self.render, self.scaled, self.seed = config, context.render, context.scaled, context.seed
-        faces = context.body_model.faces.cpu().numpy()
-        mirror, _ = mirror_vertex_map(context.body_model.v_template.double().cpu().numpy())
-        self.graph = body_graph(mesh_edges(faces), mirror, config.mirror_weight, context.body_model.num_vertices)
-        labels = context.body_model.weights.argmax(dim=1).cpu().numpy()
+        shared = context.body_models.default  # the topology and body parts every person's model shares
+        faces = shared.faces.cpu().numpy()
+        mirror, _ = mirror_vertex_map(shared.v_template.double().cpu().numpy())
+        self.graph = body_graph(mesh_edges(faces), mirror, config.mirror_weight, shared.num_vertices)
+        labels = shared.weights.argmax(dim=1).cpu().numpy()
         self.groups = part_groups(labels, mirror)
-        self.parent_group = part_parents(labels, self.groups, context.body_model.parents.cpu().numpy())
+        self.parent_group = part_parents(labels, self.groups, shared.parents.cpu().numpy())
         min_cosine = math.cos(math.radians(config.colour_max_angle_deg))
         rng = np.random.default_rng(context.seed + VIEW_SEED_OFFSET)
         self.people: dict[str, PersonPrior] = {}

@@ -7,8 +7,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from glimpse.body.config import BodyConfig, resolve_model_path
-from glimpse.body.model import BodyModel
+from glimpse.body.config import BodyConfig
+from glimpse.body.models import BodyModels
 from glimpse.cameras.model import PinholeCamera
 from glimpse.config import config_from_mapping
 from glimpse.errors import GlimpseError
@@ -30,7 +30,7 @@ class FinishedRun:
     cameras: dict[int, PinholeCamera]
     background: GaussianModel
     people: list[PersonGaussians]
-    body_model: BodyModel
+    body_models: BodyModels  # each person's body model
     render: RenderConfig
 
 
@@ -44,12 +44,13 @@ def load_finished_run(folder: Path) -> FinishedRun:
     if not params_file.is_file():
         raise GlimpseError(f"{params_file}: missing; the run folder is incomplete (rerun stage 06)")
     params = json.loads(params_file.read_text())["params"]
-    body = config_from_mapping(BodyConfig, params["body"], "body")
-    body_model = BodyModel.from_file(resolve_model_path(body))
+    # runs finished before people could have their own body model file recorded none
+    body = config_from_mapping(BodyConfig, {"person_model_paths": [], **params["body"]}, "body")
+    body_models = BodyModels.load(body)
     width, height, cameras = read_cameras_json(sfm / "cameras.json")
     background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0])
     return FinishedRun(folder, width, height, cameras, background,
-                       load_trained_people(joint / "humans", body_model), body_model,
+                       load_trained_people(joint / "humans", body_models), body_models,
                        config_from_mapping(RenderConfig, params["render"], "render"))
 
 

@@ -88,7 +88,7 @@ def render_command(run_dir: Path, camera: str, time: str, remove: str, backgroun
     missing = sorted(set(motions) - set(people))
     if missing:
         raise GlimpseError(f"--motion {', '.join(missing)}: the run's people are {', '.join(people) or 'nobody'}")
-    driven = {pid: retarget(motion, people[pid].body, times[0], run.body_model, np.arange(len(frames)))
+    driven = {pid: retarget(motion, people[pid].body, times[0], run.body_models[pid], np.arange(len(frames)))
               for pid, motion in motions.items()}
     edits = Edits(frozenset(pid for pid in remove.split(",") if pid), background, driven)
     rendered = progress(render_video_passes(run, frames, edits, CPU), total=len(frames), desc="render", unit="frame")

@@ -97,7 +97,8 @@ class ViewSession:
         if person is None:
             raise GlimpseError(f"no person {pid!r} in this run (people: {', '.join(self.pids) or 'none'})")
         sequence = motion_from_spec(motion, self.config.motion_fps, self.config.motion_seconds)
-        body = retarget(sequence, person.body, self.state.frame_id, self.run.body_model, np.arange(len(sequence)))
+        body = retarget(sequence, person.body, self.state.frame_id, self.run.body_models[person.pid],
+                        np.arange(len(sequence)))
         self._driven = driven_people(self.run, Edits(driven={pid: body}))
         self._motion_length = len(sequence)
         self.state.motion, self.state.driven_pid, self.state.motion_index = motion, pid, 0

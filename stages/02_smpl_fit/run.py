@@ -18,8 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import resolve_model_path  # noqa: E402
-from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.body.params import BODY_PARAMS_FORMAT, write_body_params  # noqa: E402
 from glimpse.compute import apply_compute  # noqa: E402
 from glimpse.fit.stage import GROUND_FORMAT, Fitter  # noqa: E402
@@ -42,8 +41,8 @@ def run(ctx: StageContext) -> None:
     units = json.loads((cameras_dir / "report.json").read_text())["units"]
     import torch
 
-    model = BodyModel.from_file(resolve_model_path(body), dtype=torch.float64)
-    fitter = Fitter(scene, model, cameras, config, units)
+    models = BodyModels.load(body, dtype=torch.float64)
+    fitter = Fitter(scene, models, cameras, config, units)
     people = [person for _, person in sorted(scene.humans.items())]
     with ctx.timed("fit"):
         fits, floor = fitter.fit_people(people, progress=lambda items: progress(items, desc="02_smpl_fit people",
@@ -61,7 +60,7 @@ def run(ctx: StageContext) -> None:
         with ctx.timed("overlay"):
             keypoints = {pid: kp for pid, person in scene.humans.items()
                          if (kp := fitter.image_keypoints(person)) is not None}
-            write_overlay_video(ctx.out / "overlay.mp4", scene, model, cameras, fits, cameras_dir / "frames",
+            write_overlay_video(ctx.out / "overlay.mp4", scene, models, cameras, fits, cameras_dir / "frames",
                                 keypoints)
         ctx.formats["overlay.mp4"] = "mp4/h264"
     ctx.summary["modes"] = {fit.pid: fit.mode for fit in fits}

@@ -17,8 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import resolve_model_path  # noqa: E402
-from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.body.params import read_body_params  # noqa: E402
 from glimpse.compute import apply_compute  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
@@ -39,9 +38,9 @@ def run(ctx: StageContext) -> None:
     camera_motion = json.loads((sfm / "report.json").read_text())["camera_motion"]
     import torch
 
-    model = BodyModel.from_file(resolve_model_path(body), dtype=torch.float64)
+    models = BodyModels.load(body, dtype=torch.float64)
     bodies = {pid: read_body_params(fits / "humans" / pid / "body.npz") for pid in scene.humans}
-    inputs = MasksInputs(scene, model, cameras, bodies, sfm / "frames", camera_motion)
+    inputs = MasksInputs(scene, models, cameras, bodies, sfm / "frames", camera_motion)
     with ctx.timed("masks"):
         doc = compute_masks(inputs, config, ctx.out)
     (ctx.out / "masks.json").write_text(json.dumps(doc, indent=1) + "\n")

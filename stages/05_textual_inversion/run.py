@@ -21,8 +21,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import resolve_model_path  # noqa: E402
-from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.body.params import read_body_params  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.crops.stage import CROPS_FORMAT, CropsInputs, identity_plan, person_summary, write_crops  # noqa: E402
@@ -48,10 +47,10 @@ def run(ctx: StageContext) -> None:
     scene = load_scene(ctx.scene_root)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")
-    model = BodyModel.from_file(resolve_model_path(ctx.section("body")), dtype=torch.float64)
+    models = BodyModels.load(ctx.section("body"), dtype=torch.float64)
     pids = sorted(scene.humans)
     bodies = {pid: read_body_params(fits / "humans" / pid / "body.npz") for pid in pids}
-    inputs = CropsInputs(pids, model, cameras, bodies, sfm / "frames", masks / "masks")
+    inputs = CropsInputs(pids, models, cameras, bodies, sfm / "frames", masks / "masks")
     with ctx.timed("crops"):
         docs = write_crops(inputs, config, compute.seed, ctx.out)
     for pid in pids:

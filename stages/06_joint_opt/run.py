@@ -25,8 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import resolve_model_path  # noqa: E402
-from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.body.params import BODY_PARAMS_FORMAT, read_body_params, write_body_params  # noqa: E402
 from glimpse.body.skinning import SKINNING_FORMAT  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
@@ -61,11 +60,11 @@ def run(ctx: StageContext) -> None:
     bodies = {pid: read_body_params(dirs["02_smpl_fit"] / "humans" / pid / "body.npz") for pid in scene.humans}
     inputs = JointInputs(cameras, width, height, dirs["01_sfm"] / "frames", dirs["03_masks"] / "masks",
                          dirs["03_masks"] / "occluders", bodies, GaussianModel.from_splats(splats), scene.fps)
-    body_model = BodyModel.from_file(resolve_model_path(body))
+    body_models = BodyModels.load(body)
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in dirs.values()])
     section = PRIORS[prior_kind].section
     with ctx.timed("train"):
-        result = train_joint(inputs, config, render, body, body_model, prior_kind,
+        result = train_joint(inputs, config, render, body, body_models, prior_kind,
                              ctx.section(section) if section else None, compute.seed, device,
                              FrameCacheSize(compute.frame_cache, compute.frame_read_ahead), ctx.work, key, ctx.out,
                              dirs["05_textual_inversion"])

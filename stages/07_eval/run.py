@@ -30,8 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from glimpse.body.config import resolve_model_path  # noqa: E402
-from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.compute import apply_compute, resolve_device  # noqa: E402
 from glimpse.config import load_pipeline_yaml  # noqa: E402
 from glimpse.errors import GlimpseError  # noqa: E402
@@ -68,18 +67,18 @@ def run(ctx: StageContext) -> None:
                             masks / "masks")
     if not view_set.views:
         raise GlimpseError(f"07_eval: no view to score (no eval/ image and no input frame with a camera in {sfm})")
-    body_model = BodyModel.from_file(resolve_model_path(body))
-    people = [p.to(device) for p in load_trained_people(joint / "humans", body_model)]
+    body_models = BodyModels.load(body)
+    people = [p.to(device) for p in load_trained_people(joint / "humans", body_models)]
     visibility = {p.pid: BodyVisibility.read(joint / "humans" / p.pid / "visibility.npz") for p in people}
     colours = person_mean_colours(sfm / "frames", masks / "masks", [p.pid for p in people], config.mean_colour_every)
     background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0]).to(device)
     prior = json.loads((joint / "manifest.json").read_text()).get("summary", {}).get("prior", "unknown")
     with ctx.timed("score"):
         tables = score_views(view_set, people, background, render, LPIPS(config.lpips_net).to(device), device,
-                             PosedBodies(people, visibility, body_model), [colours[p.pid] for p in people])
+                             PosedBodies(people, visibility, body_models), [colours[p.pid] for p in people])
     write_tables(tables, prior, view_set.description, ctx.out)
     ctx.formats.update({"metrics.json": METRICS_FORMAT, "metrics.md": "markdown"})
-    finished = FinishedRun(joint.parent, width, height, cameras, background, people, body_model, render)
+    finished = FinishedRun(joint.parent, width, height, cameras, background, people, body_models, render)
     if config.renders.enabled:
         heldout = view_set.views if view_set.source == "held-out" else []
         with ctx.timed("renders"):

@@ -100,9 +100,10 @@ class SDSPrior(UnseenPrior):
                 raise GlimpseError(f"{path}: no identity for {person.pid}; rerun stage 05 with prior.kind sds")
             self.identities[person.pid] = load_identity(self.models, path)
         self.switch = IdentitySwitch(self.models.unet)
-        self.keypoints = keypoint_map("openpose18", context.body_model.data)
-        self.skin_weights = context.body_model.weights.to(self.device, torch.float32)
-        self.labels = context.body_model.weights.argmax(dim=1).cpu().numpy()
+        models = {p.pid: context.body_models[p.pid] for p in self.people}  # each person's own model
+        self.keypoints = {pid: keypoint_map("openpose18", model.data) for pid, model in models.items()}
+        self.skin_weights = {pid: model.weights.to(self.device, torch.float32) for pid, model in models.items()}
+        self.labels = context.body_models.default.weights.argmax(dim=1).cpu().numpy()  # body parts, shared
         self.texts: dict[tuple[str, str, str], SDSText] = {}
         self.nonfinite_steps = {person.pid: 0 for person in self.people}  # SDS steps with NaN/inf guidance
 
@@ -165,7 +166,7 @@ class SDSPrior(UnseenPrior):
             pose = (person.base_pose[row] + person.pose_offsets[row]).detach().clone()
             pose[:3] = 0.0
             transforms = joint_transforms(person.rig, pose, torch.zeros(3, device=pose.device), 1.0)
-        vertices, joints = posed_body(person, transforms, self.skin_weights)
+        vertices, joints = posed_body(person, transforms, self.skin_weights[person.pid])
         size = config.early_resolution_px if sds_step < self.early_steps else config.resolution_px
         view = sample_view(kind, self.cameras, vertices, self.labels, joints[PELVIS], 1.0, size, rng)
         camera = render_camera(view.camera, self.device)
@@ -173,7 +174,7 @@ class SDSPrior(UnseenPrior):
         background = torch.as_tensor(rng.random(3), dtype=torch.float32, device=self.device)
         render = rasterize(camera, means=posed.means, covariances=posed.covariances, opacities=posed.opacities,
                            colors=posed.colors, background=background, settings=self.render)
-        skeleton = self._skeleton(vertices, joints, view.camera)
+        skeleton = self._skeleton(person.pid, vertices, joints, view.camera)
         prompt_view = view_word(view.azimuth_deg, config.prompt.front_max_deg, config.prompt.back_min_deg)
         timestep = sample_timestep(sds_step, self.timesteps, self.models.train_timesteps, generator)
         self.switch.use(self.identities[person.pid])
@@ -196,11 +197,11 @@ class SDSPrior(UnseenPrior):
                  F.interpolate(skeleton.float(), size=size, mode="nearest"), guess.float()]
         write_png(path, rgb_to_uint8(torch.cat(tiles, dim=-1)[0].permute(1, 2, 0)))
 
-    def _skeleton(self, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera) -> Tensor:
-        """[1, 3, R, R] the OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera``."""
+    def _skeleton(self, pid: str, vertices: np.ndarray, joints: np.ndarray, camera: PinholeCamera) -> Tensor:
+        """[1, 3, R, R] person ``pid``'s OpenPose skeleton in 0..1 at the diffusion resolution R, from ``camera``."""
         resolution = self.config.resolution_px
         with torch.no_grad():
-            keypoints = self.keypoints(torch.as_tensor(joints[None]), torch.as_tensor(vertices[None]))[0].numpy()
+            keypoints = self.keypoints[pid](torch.as_tensor(joints[None]), torch.as_tensor(vertices[None]))[0].numpy()
         image, _, _ = skeleton_image(keypoints, joints[HEAD_JOINT], camera.resized(resolution, resolution), resolution,
                                      self.config.skeleton_line_px)
         return unit_image(image)[None].to(self.device)
