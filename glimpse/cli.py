@@ -124,8 +124,9 @@ def main(argv: list[str] | None = None) -> int:
                                                           "protocol docs/datasets.md gives)")
     p_import.add_argument("--frames", default=None, help="A:B[:STEP] of the sequence's frames (B excluded; "
                                                          "Panoptic, Hi4D: their frame numbers; default: all)")
-    p_import.add_argument("--eval-every", type=int, default=30, help="held-out images every this many imported "
-                                                                     "frames (default 30, HumanNeRF's protocol)")
+    p_import.add_argument("--eval-every", type=int, default=None, help="held-out images every this many imported "
+                                                                       "frames (default: pipeline.yaml import.eval_every, "
+                                                                       "30: HumanNeRF's protocol)")
     p_import.add_argument("--body-model", action="append", default=[], metavar="[GENDER=]PATH",
                           help="an SMPL model file the dataset's bodies belong to: PATH (neutral) or male=PATH, "
                                "female=PATH; repeatable")
@@ -239,13 +240,18 @@ def _dispatch(args: argparse.Namespace) -> int:
                load_ingest_config(args.params))
         return 0
     if args.command == "import":
+        from glimpse.config import command_params, config_from_mapping
         from glimpse.importers import import_dataset
         from glimpse.importers.common import ImportOptions, parse_body_models, parse_span
+        from glimpse.importers.config import ImportConfig
 
-        if args.eval_every < 1:
-            raise GlimpseError(f"--eval-every {args.eval_every}: must be at least 1")
+        eval_every = config_from_mapping(ImportConfig, command_params("")["import"], "import").eval_every
+        if args.eval_every is not None:
+            if args.eval_every < 1:
+                raise GlimpseError(f"--eval-every {args.eval_every}: must be at least 1")
+            eval_every = args.eval_every
         options = ImportOptions(args.sequence, tuple(args.cameras.split(",")) if args.cameras else None,
-                                parse_span(args.frames) if args.frames else None, args.eval_every,
+                                parse_span(args.frames) if args.frames else None, eval_every,
                                 parse_body_models(args.body_model), args.fps)
         scene = import_dataset(args.dataset, args.source, args.scene, options)
         print(f"imported {args.dataset} into {scene} (check it: glimpse validate {scene}; run it: "

@@ -169,3 +169,16 @@ def test_bad_sources_get_one_message(tmp_path, imported, capsys):
     assert cli(["import", "hi5d", str(tmp_path), str(tmp_path / "s")]) == EXIT_BAD_INPUT
     assert "Glimpse imports emdb, hi4d, panoptic, zju-mocap" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
+
+
+def test_the_held_out_spacing_comes_from_pipeline_yaml_and_the_command_line(imported, tmp_path, monkeypatch):
+    from glimpse.config import load_pipeline_yaml
+
+    assert ImportOptions().eval_every == load_pipeline_yaml()["import"]["eval_every"]  # one default, kept equal
+    seen = []
+    monkeypatch.setattr("glimpse.importers.import_dataset", lambda dataset, source, scene, options: seen.append(
+        options.eval_every) or scene)
+    for extra, expected in (([], load_pipeline_yaml()["import"]["eval_every"]), (["--eval-every", "3"], 3)):
+        assert cli(["import", "zju-mocap", str(imported[2]), str(tmp_path / "s"), *extra]) == 0
+        assert seen[-1] == expected
+    assert cli(["import", "zju-mocap", str(imported[2]), str(tmp_path / "s"), "--eval-every", "0"]) == EXIT_BAD_INPUT

@@ -24,7 +24,7 @@ class ImportOptions:
     sequence: str | None = None
     cameras: tuple[str, ...] | None = None
     frames: slice | None = None
-    eval_every: int = 30
+    eval_every: int = 30  # pipeline.yaml import.eval_every, which glimpse import passes (a test keeps them equal)
     body_models: dict[str, Path] = field(default_factory=dict)
     fps: float | None = None
 

@@ -11,6 +11,7 @@ from glimpse.compute import ComputeConfig
 from glimpse.crops.config import CropsConfig
 from glimpse.eval.config import EvalConfig
 from glimpse.fit.config import FitConfig
+from glimpse.importers.config import ImportConfig
 from glimpse.ingest.config import IngestConfig
 from glimpse.joint.config import JointConfig
 from glimpse.masks.config import MasksConfig
@@ -30,6 +31,7 @@ SECTION_CONFIGS: dict[str, type] = {
     "report": ReportConfig,
     "view": ViewConfig,
     "batch": BatchConfig,
+    "import": ImportConfig,
     "ingest": IngestConfig,
     "01_sfm": CamerasConfig,
     "02_smpl_fit": FitConfig,
