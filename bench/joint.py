@@ -38,6 +38,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.cameras.model import render_camera  # noqa: E402
 from glimpse.eval.coverage import CoverageConfig, canonical_hole_share  # noqa: E402
 from glimpse.eval.renders import canonical_turntable  # noqa: E402
@@ -117,7 +118,7 @@ def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
 
 def trained_people(run_dir: Path) -> list:
     """Stage 06's people of a run, loaded once for the holes and the turntables."""
-    return load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModel.from_file(BODY_MODEL))
+    return load_trained_people(run_dir / "06_joint_opt" / "humans", BodyModels(BodyModel.from_file(BODY_MODEL)))
 
 
 def hole_shares(people: list) -> str:

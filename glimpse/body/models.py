@@ -19,7 +19,7 @@ from glimpse.errors import GlimpseError
 
 
 class BodyModels:
-    """pid -> BodyModel. ``default`` is the shared model; ``faces`` and ``parents`` are every model's."""
+    """pid -> BodyModel. ``default`` is the shared model; ``faces`` are every model's."""
 
     def __init__(self, default: BodyModel, own: dict[str, BodyModel] | None = None):
         self.default = default
@@ -46,12 +46,6 @@ class BodyModels:
     def faces(self) -> torch.Tensor:
         """[F, 3] long: the faces every person's model shares."""
         return self.default.faces
-
-    def to(self, device: torch.device | str) -> BodyModels:
-        """Every model moved to ``device``, in place (as nn.Module.to); returns self."""
-        for model in {id(m): m for m in (self.default, *self.own.values())}.values():
-            model.to(device)
-        return self
 
 
 def _check_topology(default: BodyModel, model: BodyModel, pid: str) -> None:
