@@ -45,6 +45,9 @@ def test_a_persons_own_model_file_is_checked_like_the_shared_one(tmp_path):
         prepare_run(scene, tmp_path / "out", "body.person_model_paths=[p0]")
     with pytest.raises(GlimpseError, match=r"person 'p0' is given twice"):
         prepare_run(scene, tmp_path / "out", f"body.person_model_paths=[p0={free},p0={free}]")
+    people = sorted(folder.name for folder in (scene / "humans").iterdir())
+    with pytest.raises(GlimpseError, match=rf"names zoe, not a person of .*its people: {', '.join(people)}"):
+        prepare_run(scene, tmp_path / "out", f"body.person_model_paths=[zoe={free}]")
 
 
 def test_a_persons_own_model_of_another_kind_than_the_scenes_parameters_is_refused(tmp_path):

@@ -21,7 +21,7 @@ from typing import Any, ContextManager
 
 import yaml
 
-from glimpse.body.config import BodyConfig, check_scene_body_model
+from glimpse.body.config import BodyConfig, check_scene_body_model, person_model_files
 from glimpse.config import (
     Params,
     config_from_mapping,
@@ -260,8 +260,13 @@ def resolve_scene_params(scene_root: Path, cli_params: str) -> Params:
     params = resolve_params(load_pipeline_yaml(resolve_auto=False), scene_yaml.get("overrides") or {},
                             parse_cli_params(cli_params),
                             str(scene_root / "scene.yaml"))
+    body = config_from_mapping(BodyConfig, params["body"], "body")
+    people = sorted(folder.name for folder in scene_root.glob("humans/*") if folder.is_dir())
+    strangers = sorted(set(person_model_files(body)) - set(people))
+    if strangers:
+        raise ConfigError(f"body.person_model_paths names {', '.join(strangers)}, not a person of {scene_root} "
+                          f"(its people: {', '.join(people) or 'none'})")
     if any(scene_root.glob("humans/*/smpl.npz")):
-        body = config_from_mapping(BodyConfig, params["body"], "body")
         check_scene_body_model(scene_yaml.get("body_model", "free"), body, str(scene_root / "scene.yaml"))
     return params
 
