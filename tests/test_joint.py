@@ -581,3 +581,28 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
         assert torch.equal(a, b)
     assert torch.equal(first.people[0].pose_offsets, second.people[0].pose_offsets)
     assert torch.equal(first.background.sh_dc, second.background.sh_dc)
+
+
+def test_a_held_out_frame_of_the_input_video_is_scored_with_people_posed_between_its_neighbours(tiny, tmp_path):
+    import shutil
+
+    from glimpse.body.params import write_body_params
+
+    scene, run_dir = tiny
+    out = tmp_path / "out" / run_dir.name
+    shutil.copytree(run_dir, out, ignore=shutil.ignore_patterns("07_eval", ".lock"))
+    held = 4  # a frame with held-out images, as if stage 06 never had it: people posed there from frames 3 and 5
+    for path in (out / "06_joint_opt" / "humans").glob("*/body.npz"):
+        body = read_body_params(path)
+        write_body_params(path, body.select([f for f in body.frame_ids if f != held]))
+    params = SHORT + " 07_eval.renders.enabled=false 07_eval.speed.enabled=false"
+    between = read_json(run("07_eval", scene, tmp_path / "out", params) / "metrics.json")["tables"]["humans"]["rows"]
+    given = read_json(run_dir / "07_eval" / "metrics.json")["tables"]["humans"]["rows"]
+
+    def at_held(rows: list, k: int) -> list[dict]:
+        return [f for f in rows[k]["frames"] if f["frame"].endswith(f"/{held:06d}")]
+
+    assert at_held(between, 0) and len(at_held(between, 0)) == len(at_held(given, 0))
+    for interpolated, exact, empty in zip(at_held(between, 0), at_held(given, 0), at_held(between, 1)):
+        assert abs(interpolated["psnr"] - exact["psnr"]) < 1.0  # neighbours' poses, nearly the frame's own
+        assert interpolated["lpips"] < 0.5 * empty["lpips"]  # the people are drawn there, not left out

@@ -377,3 +377,22 @@ def test_resample_lengths_and_edge_cases():
     assert len(single) == 1 and single.fps == 60.0
     with pytest.raises(GlimpseError, match="fps"):
         resample(_sequence(3, 30.0), 0.0)
+
+
+def test_a_person_is_posed_at_held_out_frames_between_their_own():
+    from glimpse.body.params import BodyParams
+
+    rng = np.random.default_rng(4)
+    body = BodyParams(np.array([0, 2, 6]), rng.normal(size=10), rng.normal(0, 0.4, (3, 3)), rng.normal(0, 0.2, (3, 69)),
+                      rng.normal(0, 1, (3, 3)), 1.3, "free", np.zeros(3, bool))
+    filled = body.with_frames_between([1, 4, 2, 7, -1])  # 2 is theirs; 7 and -1 lie outside their frames
+    assert filled.frame_ids.tolist() == [0, 1, 2, 4, 6] and filled.interpolated.tolist() == [0, 1, 0, 1, 0]
+    own = [0, 2, 4]
+    for name in ("global_orient", "body_pose", "transl"):
+        assert np.array_equal(getattr(filled, name)[own], getattr(body, name))  # their rows, exactly
+    assert np.allclose(filled.transl[1], body.transl[:2].mean(0))
+    assert np.allclose(filled.transl[3], body.transl[1] + 0.5 * (body.transl[2] - body.transl[1]))
+    a, b = Rotation.from_rotvec(body.global_orient[0]), Rotation.from_rotvec(body.global_orient[1])
+    halfway = a * Rotation.from_rotvec(0.5 * (a.inv() * b).as_rotvec())  # the shortest arc's midpoint
+    assert np.allclose(Rotation.from_rotvec(filled.global_orient[1]).as_matrix(), halfway.as_matrix())
+    assert filled.scale == body.scale and body.with_frames_between([7]) is body

@@ -628,3 +628,32 @@ def test_image_helpers(tmp_path: Path) -> None:
         read_rgb(tmp_path / "bad.png")
     with pytest.raises(ValueError):
         write_png(tmp_path / "f.png", np.zeros((4, 4), np.float32))
+
+
+@pytest.mark.parametrize("held", [1, 3])
+def test_a_held_out_frame_of_the_input_video_may_be_scored_only_between_the_scenes_frames(tmp_path, held):
+    """Frames 0 and 2 are the input; frame 1 was held out of it for evaluation (as NeuMan's protocol holds
+    frames of the video out): its held-out image and pose are valid. Frame 3 lies after the video."""
+    from glimpse.scene.writer import SceneWriter
+    from tests.scene_builder import _write_person, intrinsics
+
+    ids = [0, 2]
+    writer = SceneWriter(tmp_path / "scene", "gap", 10, "moving", "smpl")
+    for i in ids:
+        writer.frame(i, rgb(WIDTH, HEIGHT, seed=i))
+    K = np.array(intrinsics(WIDTH, HEIGHT))
+    writer.input_cameras(WIDTH, HEIGHT, K, None, {i: CameraPose(rotation_y(0.05 * i), np.array([0.0, 0.0, 3.0]))
+                                                   for i in ids})
+    _write_person(writer, "p0", ids, WIDTH, HEIGHT, seed=0)
+    pose = CameraPose(rotation_y(0.05 * held), np.array([0.0, 0.0, 3.0]))
+    writer.eval_camera("video", WIDTH, HEIGHT, K, pose.R, pose.t, poses={held: pose})
+    union = mask(WIDTH, HEIGHT, seed=held) > 0
+    writer.eval_view("video", held, rgb(WIDTH, HEIGHT, seed=10), union, {"p0": union})
+    if held == 1:
+        scene = load_scene(writer.finish())
+        assert scene.frame_ids == [0, 2] and sorted(scene.eval_cameras["video"].images) == [1]
+        assert np.allclose(scene.eval_cameras["video"].camera_at(1).R, pose.R)
+    else:
+        with pytest.raises(SceneError, match=r"eval image's frame id must be a frame of the scene, or lie between "
+                                             r"its first and last frame"):
+            writer.finish()

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from glimpse.body.motion import interpolate_pose_sequence
 from glimpse.errors import GlimpseError
 
 BODY_PARAMS_FORMAT = "glimpse-body-params/1"
@@ -48,6 +49,30 @@ class BodyParams:
         keep = np.isin(self.frame_ids, np.asarray(frame_ids))
         return BodyParams(self.frame_ids[keep], self.betas, self.global_orient[keep], self.body_pose[keep],
                           self.transl[keep], self.scale, self.body_model, self.interpolated[keep])
+
+
+    def with_frames_between(self, frame_ids: list[int] | np.ndarray) -> "BodyParams":
+        """The same person also at those of ``frame_ids`` that lie strictly between two of their frames and are
+        not theirs (held-out frames of the input video): every joint rotation slerped and the translation lerped
+        between the neighbouring frames (glimpse.body.motion.interpolate_pose_sequence), marked interpolated.
+        Their own rows are kept exactly; ids outside their span are left out."""
+        own = self.frame_ids.astype(np.int64)
+        wanted = np.unique(np.asarray(frame_ids, np.int64))
+        new = wanted[(wanted > own.min()) & (wanted < own.max()) & ~np.isin(wanted, own)] if len(own) else wanted[:0]
+        if len(new) == 0:
+            return self
+        order = np.argsort(own)
+        added = interpolate_pose_sequence(own[order].astype(float), self.global_orient[order], self.body_pose[order],
+                                          self.transl[order], new.astype(float))
+        ids = np.concatenate([own, new])
+        rows = np.argsort(ids, kind="stable")
+
+        def merged(mine: np.ndarray, theirs: np.ndarray) -> np.ndarray:
+            return np.concatenate([mine, theirs.astype(mine.dtype)])[rows]
+
+        return BodyParams(ids[rows], self.betas, merged(self.global_orient, added["global_orient"]),
+                          merged(self.body_pose, added["body_pose"]), merged(self.transl, added["transl"]),
+                          self.scale, self.body_model, merged(self.interpolated, np.ones(len(new), bool)))
 
 
 def read_scene_smpl(path: Path, body_model: str) -> BodyParams:

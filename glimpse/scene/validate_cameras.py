@@ -176,9 +176,10 @@ class CameraChecks:
         if "K" in entry:
             self.intrinsics(entry["K"], f"{name}.K")
 
-    def frame_poses(self, value: object, name: str, frame_ids: set[int] | None) -> bool | None:
-        """A ``"frames"`` mapping of 6-digit frame id -> pose, ids among ``frame_ids``
-        (not checked when None).  Returns whether it holds poses, None when it is no mapping."""
+    def frame_poses(self, value: object, name: str, frame_ids: set[int] | None, between: bool = False) -> bool | None:
+        """A ``"frames"`` mapping of 6-digit frame id -> pose, ids among ``frame_ids`` (not checked when None), or,
+        with ``between``, inside their span (held-out frames of the input video). Returns whether it holds
+        poses, None when it is no mapping."""
         if not isinstance(value, dict):
             self.add(f'{name} must be an object mapping frame ids to {{"R", "t"}}', describe(value))
             return None
@@ -187,11 +188,19 @@ class CameraChecks:
             frame_id = parse_frame_name(key)
             if frame_id is None:
                 self.add(f"{name} keys must be 6-digit frame ids", f'"{key}"')
-            elif frame_ids is not None and frame_id not in frame_ids:
-                self.add(f"{name} keys must be frame ids of the scene",
+            elif frame_ids is not None and not (frame_id in frame_ids or (between and in_span(frame_id, frame_ids))):
+                rule = "frame ids of the scene, or ids between its first and last frame" if between else \
+                    "frame ids of the scene"
+                self.add(f"{name} keys must be {rule}",
                          f'"{key}" is not among the scene\'s frames ({describe_range(frame_ids)})')
             self.pose(entry, where)
         return bool(value)
+
+
+def in_span(frame_id: int, frame_ids: set[int]) -> bool:
+    """Whether ``frame_id`` lies between the first and the last of ``frame_ids`` (a frame the input video had,
+    held out of the scene's frames for evaluation)."""
+    return bool(frame_ids) and min(frame_ids) < frame_id < max(frame_ids)
 
 
 def check_cameras_json(facts: SceneFacts) -> None:

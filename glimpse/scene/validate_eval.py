@@ -18,7 +18,7 @@ from glimpse.scene._common import (
     list_folder,
 )
 from glimpse.scene.model import EVAL_CAMERAS_FORMAT
-from glimpse.scene.validate_cameras import CameraChecks, load_json
+from glimpse.scene.validate_cameras import CameraChecks, in_span, load_json
 
 EVAL_KEYS = ("format", "cameras")
 EVAL_CAMERA_REQUIRED = ("K", "R", "t", "width", "height")
@@ -103,7 +103,7 @@ def _check_eval_camera(check: CameraChecks, facts: SceneFacts, where: str, entry
     if "t" in entry:
         check.vector(entry["t"], f"{where}.t", 3)
     if "frames" in entry:
-        check.frame_poses(entry["frames"], f"{where}.frames", facts.frame_ids)
+        check.frame_poses(entry["frames"], f"{where}.frames", facts.frame_ids, between=True)
     width = check.positive_int(entry["width"], f"{where}.width") if "width" in entry else None
     height = check.positive_int(entry["height"], f"{where}.height") if "height" in entry else None
     return (width, height) if width is not None and height is not None else None
@@ -133,8 +133,9 @@ def check_eval_camera_folder(facts: SceneFacts, cam_dir: Path, size: Size) -> No
     if not images:
         facts.add(f"eval/{cam}/", "an eval camera must have at least one image", "no images")
     for frame_id, path in images.items():
-        if facts.frame_ids is not None and frame_id not in facts.frame_ids:
-            facts.add(facts.rel(path), "an eval image's frame id must be a frame of the scene",
+        if facts.frame_ids is not None and not (frame_id in facts.frame_ids or in_span(frame_id, facts.frame_ids)):
+            facts.add(facts.rel(path), "an eval image's frame id must be a frame of the scene, or lie between its "
+                                       "first and last frame (a held-out frame of the input video)",
                       f"{path.stem}, not among the scene's frames ({describe_range(facts.frame_ids)})")
         info = check_image(facts, path, "an eval image")
         if info is not None and size is not None and (info.width, info.height) != size:

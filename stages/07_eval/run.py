@@ -4,7 +4,8 @@ Inputs:  01_sfm/ (frames, cameras.json, report.json), 03_masks/masks/ (the peopl
          truth when scoring the input view), 04_bg_pretrain/never_seen/ (tinted in removed_<pid>.mp4),
          06_joint_opt/ (humans/<pid>/{canonical.ply, skinning.npz, body.npz, visibility.npz}, background.ply,
          manifest);
-         the scene's eval/ (held-out cameras, ground-truth images and masks).
+         the scene's eval/ (held-out cameras, ground-truth images and masks; an image of a frame the scene held
+         out of its input is scored with the people posed between their neighbouring frames).
 Params:  07_eval, body, render, compute (pipeline.yaml).
 Outputs (OUT/<scene>/07_eval/, CONTRACTS.md):
   metrics.json   glimpse-eval-metrics/1: tables "humans" (GTU's protocol: people only on black against the
@@ -68,7 +69,10 @@ def run(ctx: StageContext) -> None:
     if not view_set.views:
         raise GlimpseError(f"07_eval: no view to score (no eval/ image and no input frame with a camera in {sfm})")
     body_models = BodyModels.load(body)
-    people = [p.to(device) for p in load_trained_people(joint / "humans", body_models)]
+    # a held-out view may show a frame of the input video that the scene held out: people are posed there
+    # between their neighbouring frames
+    people = [p.to(device) for p in load_trained_people(joint / "humans", body_models,
+                                                        [view.frame_id for view in view_set.views])]
     visibility = {p.pid: BodyVisibility.read(joint / "humans" / p.pid / "visibility.npz") for p in people}
     colours = person_mean_colours(sfm / "frames", masks / "masks", [p.pid for p in people], config.mean_colour_every)
     background = GaussianModel.from_splats(read_gaussians_ply(joint / "background.ply")[0]).to(device)
