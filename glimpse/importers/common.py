@@ -1,5 +1,6 @@
 """What every dataset importer shares: the options of ``glimpse import``, frame spans, masks stored as any
-non-zero value, camera names, and the body models a dataset's SMPL parameters need."""
+non-zero value, camera names, the body models a dataset's SMPL parameters need, and writing a held-out camera's
+undistorted views."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ import numpy as np
 from PIL import Image
 
 from glimpse.body.config import peek_body_model_kind
+from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
+from glimpse.scene.writer import SceneWriter
 
 
 @dataclass(frozen=True)
@@ -102,3 +105,25 @@ def camera_name(text: str) -> str:
     """A dataset's camera folder name as a scene camera name (letters, digits, _ and -)."""
     cleaned = "".join(c if c.isalnum() or c in "_-" else "_" for c in text.strip()).strip("_")
     return "_".join(part for part in cleaned.split("_") if part) or "camera"
+
+
+class HeldOutCamera:
+    """One held-out camera of a dataset, written as it is read: registered in eval/cameras.json at its first
+    image's size, every image and mask undistorted by the one Undistorter made then. K [3, 3], dist (OpenCV),
+    R [3, 3] and t [3] (metres) world to camera."""
+
+    def __init__(self, writer: SceneWriter, name: str, K: np.ndarray, dist: np.ndarray, R: np.ndarray,
+                 t: np.ndarray):
+        self.writer, self.name, self.K, self.dist, self.R, self.t = writer, name, K, dist, R, t
+        self.undistorter: Undistorter | None = None
+
+    def view(self, frame: int, rgb: np.ndarray, person_masks: dict[str, np.ndarray] | None = None) -> None:
+        """The camera's image of ``frame`` with each person's visible mask (pid -> [H, W] bool) and their union;
+        without masks the view is scored on the full frame only."""
+        if self.undistorter is None:
+            height, width = rgb.shape[:2]
+            self.undistorter = Undistorter(self.K, self.dist, width, height)
+            self.writer.eval_camera(self.name, width, height, self.K, self.R, self.t)
+        masks = {pid: self.undistorter.mask(mask) for pid, mask in (person_masks or {}).items()}
+        union = np.logical_or.reduce(list(masks.values())) if masks else None
+        self.writer.eval_view(self.name, frame, self.undistorter.image(rgb), union, masks)

@@ -25,8 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.errors import GlimpseError
-from glimpse.cameras.undistort import Undistorter
-from glimpse.importers.common import ImportOptions, nonzero_mask, numbered_frames, smpl_model_file
+from glimpse.importers.common import HeldOutCamera, ImportOptions, nonzero_mask, numbered_frames, smpl_model_file
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npz
 from glimpse.io.progress import progress
@@ -147,14 +146,8 @@ def import_hi4d(source: Path, scene_dir: Path, options: ImportOptions) -> Path:
     scored = frames[:: max(1, options.eval_every)]
     for camera_id in progress(heldout, desc=f"{DATASET} {name} held-out views", unit="camera"):
         camera = cameras[camera_id]
-        undistorter = None  # one per camera, made at its first image's size
+        held = HeldOutCamera(writer, f"cam{camera_id}", camera["K"], camera["dist"], camera["R"], camera["t"])
         for frame in scored:
-            rgb = read_rgb(folder / "images" / camera_id / f"{frame:06d}.jpg")
-            if undistorter is None:
-                undistorter = Undistorter(camera["K"], camera["dist"], rgb.shape[1], rgb.shape[0])
-                writer.eval_camera(f"cam{camera_id}", rgb.shape[1], rgb.shape[0], camera["K"], camera["R"],
-                                   camera["t"])
-            masks = [undistorter.mask(m) for m in masks_of(folder, camera_id, frame)]
-            writer.eval_view(f"cam{camera_id}", frame, undistorter.image(rgb), np.logical_or.reduce(masks),
-                             {f"p{k}": m for k, m in enumerate(masks)})
+            held.view(frame, read_rgb(folder / "images" / camera_id / f"{frame:06d}.jpg"),
+                      {f"p{k}": mask for k, mask in enumerate(masks_of(folder, camera_id, frame))})
     return writer.finish()

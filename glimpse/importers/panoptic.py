@@ -25,8 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.errors import GlimpseError
-from glimpse.cameras.undistort import Undistorter
-from glimpse.importers.common import ImportOptions, numbered_frames
+from glimpse.importers.common import HeldOutCamera, ImportOptions, numbered_frames
 from glimpse.io.images import read_rgb
 from glimpse.io.progress import progress
 from glimpse.io.video import iter_video_frames
@@ -144,11 +143,7 @@ def import_panoptic(source: Path, scene_dir: Path, options: ImportOptions) -> Pa
     scored = frames[:: max(1, options.eval_every)]
     for name in progress(heldout, desc=f"{DATASET} {folder.name} held-out views", unit="camera"):
         camera = calibration[name]
-        undistorter = None  # one per camera, made at its first image's size
+        held = HeldOutCamera(writer, f"hd_{name}", camera["K"], camera["dist"], camera["R"], camera["t"])
         for frame, distorted in HdFrames(folder, name).frames(scored):
-            if undistorter is None:
-                height, width = distorted.shape[:2]
-                undistorter = Undistorter(camera["K"], camera["dist"], width, height)
-                writer.eval_camera(f"hd_{name}", width, height, camera["K"], camera["R"], camera["t"])
-            writer.eval_view(f"hd_{name}", frame, undistorter.image(distorted))  # no masks: the full frame
+            held.view(frame, distorted)  # no masks: the full frame
     return writer.finish()

@@ -26,8 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from glimpse.body.model_file import load_body_model_file
 from glimpse.errors import GlimpseError
-from glimpse.cameras.undistort import Undistorter
-from glimpse.importers.common import ImportOptions, camera_name, nonzero_mask, smpl_model_file
+from glimpse.importers.common import HeldOutCamera, ImportOptions, camera_name, nonzero_mask, smpl_model_file
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npy
 from glimpse.io.progress import progress
@@ -164,16 +163,11 @@ def import_zju_mocap(source: Path, scene_dir: Path, options: ImportOptions) -> P
     writer.smpl(PID, np.asarray(positions), params["shapes"][0], global_orient, body_pose, transl)
     scored = positions[:: max(1, options.eval_every)]
     for index in progress(heldout, desc=f"{DATASET} {folder.name} held-out views", unit="camera"):
-        name = camera_name(names[index])
-        undistorter = None  # one per camera, made at its first image's size
+        held = HeldOutCamera(writer, camera_name(names[index]), cameras["K"][index], cameras["D"][index],
+                             cameras["R"][index], cameras["t"][index])
         for position in scored:
-            rgb = read_rgb(folder / images[position][index])
-            if undistorter is None:
-                undistorter = Undistorter(cameras["K"][index], cameras["D"][index], rgb.shape[1], rgb.shape[0])
-                writer.eval_camera(name, rgb.shape[1], rgb.shape[0], cameras["K"][index], cameras["R"][index],
-                                   cameras["t"][index])
-            mask = undistorter.mask(person_mask(folder, images[position][index]))
-            writer.eval_view(name, position, undistorter.image(rgb), mask, {PID: mask})
+            held.view(position, read_rgb(folder / images[position][index]),
+                      {PID: person_mask(folder, images[position][index])})
     return writer.finish()
 
 
