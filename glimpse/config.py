@@ -31,6 +31,10 @@ PIPELINE_YAML = REPO_ROOT / "pipeline.yaml"
 Params = dict[str, dict[str, Any]]  # section name -> key -> value
 AUTO = "auto"
 SCHEDULE_SCALE = "schedule_scale"  # the key, in any section, that scales that section's iteration counts
+# The pipeline's stages in order, each the name of its output folder in OUT/<scene>/ (glimpse.pipeline.stages
+# declares each one; the report and the batch runner, below the pipeline, read the run folder by these)
+STAGE_NAMES = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt",
+               "07_eval")
 
 
 def pipeline_yaml_path() -> Path:

@@ -119,3 +119,9 @@ def test_compute_device_resolves_to_cpu_here_and_refuses_a_missing_cuda():
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="compute.device is cuda"):
             resolve_device(ComputeConfig("cuda", 1, 0, 32, 4, schedules))
+
+
+def test_the_stage_names_the_report_and_the_batch_read_are_the_pipelines_stages_in_order():
+    from glimpse.config import STAGE_NAMES
+
+    assert tuple(spec.name for spec in STAGES) == STAGE_NAMES

@@ -15,11 +15,10 @@ from pathlib import Path
 
 import yaml
 
+from glimpse.config import STAGE_NAMES
 from glimpse.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_USAGE
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
-STAGE_FOLDERS = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt",
-                 "07_eval")
 LOG_TAIL_LINES = 15  # lines of a failed attempt's output kept in the result
 NOT_RETRIED = (EXIT_USAGE, EXIT_BAD_INPUT)  # a wrong command line or bad input fails the same way again
 STOPPED_BY_USER = (EXIT_INTERRUPTED, -signal.SIGINT)  # Ctrl-C: not retried (Slurm's SIGTERM/SIGUSR2 are)
@@ -111,7 +110,7 @@ def manifest_stamps(run_dir: Path | None) -> dict[str, float]:
     if run_dir is None:
         return {}
     stamps = {}
-    for stage in STAGE_FOLDERS:
+    for stage in STAGE_NAMES:
         manifest = run_dir / stage / "manifest.json"
         if manifest.is_file():
             stamps[stage] = manifest.stat().st_mtime_ns
@@ -148,7 +147,7 @@ def run_scene(job: SceneJob) -> SceneResult:
             code = subprocess.run(job.command(), stdout=output, stderr=subprocess.STDOUT, env=env).returncode
         after = manifest_stamps(run_dir_of(job))
         attempts.append(Attempt(number, code, round(time.perf_counter() - began, 1),
-                                [s for s in STAGE_FOLDERS if s in after and after[s] != before.get(s)], str(log)))
+                                [s for s in STAGE_NAMES if s in after and after[s] != before.get(s)], str(log)))
         if code == 0:
             status = "done"
             break

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from glimpse.config import STAGE_NAMES
 from glimpse.errors import GlimpseError
 
-STAGES = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion", "06_joint_opt", "07_eval")
 LOG_FILE = "log.txt"
 
 
@@ -58,13 +58,13 @@ def read_run(root: Path) -> RunRecord:
     """The manifests and reports of every finished stage of the run folder ``root``. Raises GlimpseError when
     ``root`` is not a run folder (no stage has finished there)."""
     root = Path(root)
-    manifests = {s: _read_json(root / s / "manifest.json") for s in STAGES if (root / s / "manifest.json").is_file()}
+    manifests = {s: _read_json(root / s / "manifest.json") for s in STAGE_NAMES if (root / s / "manifest.json").is_file()}
     if not manifests:
         raise GlimpseError(f"{root}: not a run folder (no stage's manifest.json in it); a run folder is "
                            "OUT/<scene name>, e.g. runs/demo_small")
     reports = {key: _read_json(root / rel) for key, rel in REPORT_FILES.items()
                if rel.split("/")[0] in manifests and (root / rel).is_file()}
-    failed = {s: root / f"{s}.failed.{LOG_FILE}" for s in STAGES if (root / f"{s}.failed.{LOG_FILE}").is_file()}
+    failed = {s: root / f"{s}.failed.{LOG_FILE}" for s in STAGE_NAMES if (root / f"{s}.failed.{LOG_FILE}").is_file()}
     return RunRecord(root, manifests, reports, failed)
 
 

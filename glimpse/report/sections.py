@@ -9,12 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from glimpse.config import STAGE_NAMES
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.images import frame_files, frame_name, read_mask, read_rgb, write_png
 from glimpse.report import figures
 from glimpse.report.config import ReportConfig
 from glimpse.report.html import esc, image, markdown, table, video
-from glimpse.report.run_record import LOG_FILE, STAGES, RunRecord, changed_params, warnings_in_log
+from glimpse.report.run_record import LOG_FILE, RunRecord, changed_params, warnings_in_log
 
 
 @dataclass
@@ -313,7 +314,7 @@ def timings_section(record: RunRecord, assets: Assets) -> str:
 
 def logs_section(record: RunRecord, config: ReportConfig) -> str:
     html = ""
-    for stage in STAGES:
+    for stage in STAGE_NAMES:
         log = record.stage_dir(stage) / LOG_FILE
         if record.has(stage) and log.is_file():
             lines = warnings_in_log(log, config.log_lines)
