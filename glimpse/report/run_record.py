@@ -58,7 +58,8 @@ def read_run(root: Path) -> RunRecord:
     """The manifests and reports of every finished stage of the run folder ``root``. Raises GlimpseError when
     ``root`` is not a run folder (no stage has finished there)."""
     root = Path(root)
-    manifests = {s: _read_json(root / s / "manifest.json") for s in STAGE_NAMES if (root / s / "manifest.json").is_file()}
+    manifests = {s: _read_json(root / s / "manifest.json") for s in STAGE_NAMES
+                 if (root / s / "manifest.json").is_file()}
     if not manifests:
         raise GlimpseError(f"{root}: not a run folder (no stage's manifest.json in it); a run folder is "
                            "OUT/<scene name>, e.g. runs/demo_small")
