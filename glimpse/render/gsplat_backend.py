@@ -5,6 +5,10 @@ given CPU tensors. gsplat samples pixel centres at (i + 0.5), Glimpse (OpenCV) a
 i, so the principal point is shifted by +0.5 on the way in (CONTRACTS.md). The
 composited channels are Glimpse's (colour, ones, depth, group indicators), so the
 outputs mean the same as the other backends'.
+
+On CUDA tensors the covariances and spherical harmonics are computed by gsplat's fused kernels too
+(:func:`gsplat_ops_apply`): done by PyTorch there they are dozens of small kernel launches each, and a
+training iteration on a GPU is bound by launches, not by the GPU's work (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -16,6 +20,35 @@ from glimpse.errors import GlimpseError
 from glimpse.render.projection import LOW_PASS, Camera, Projected
 
 GSPLAT_PIXEL_OFFSET = 0.5
+SH_CHANNELS = 3  # gsplat's spherical_harmonics evaluates RGB coefficients only
+
+
+def _gsplat_ops():
+    """gsplat's CUDA wrappers (gsplat.cuda._wrapper), or None when gsplat is not installed."""
+    try:
+        from gsplat.cuda import _wrapper
+    except ImportError:
+        return None
+    return _wrapper
+
+
+def gsplat_ops_apply(*tensors: Tensor) -> bool:
+    """Whether gsplat's fused kernels can compute on ``tensors``: all float32 on CUDA, and gsplat installed."""
+    return all(t.is_cuda and t.dtype == torch.float32 for t in tensors) and _gsplat_ops() is not None
+
+
+def quat_scale_to_covariance_gsplat(quats: Tensor, scales: Tensor) -> Tensor:
+    """quats [N, 4] wxyz (any length), scales [N, 3] -> covariances [N, 3, 3] = R S Sᵀ Rᵀ, by gsplat's kernel."""
+    covariances, _ = _gsplat_ops().quat_scale_to_covar_preci(quats, scales, compute_covar=True, compute_preci=False)
+    return covariances
+
+
+def sh_to_rgb_gsplat(degree: int, sh_coeffs: Tensor, dirs: Tensor) -> Tensor:
+    """sh_coeffs [N, K, 3], dirs [N, 3] (any length) -> the 3DGS colour [N, 3] = max(SH(dirs) + 0.5, 0),
+    by gsplat's kernel (the sum without the offset; gsplat adds it in its own rasterization)."""
+    from glimpse.render.sh import MIN_RGB, RGB_OFFSET
+
+    return torch.clamp_min(_gsplat_ops().spherical_harmonics(degree, dirs, sh_coeffs) + RGB_OFFSET, MIN_RGB)
 
 
 def rasterize_gsplat(camera: Camera, means: Tensor, covariances: Tensor, opacities: Tensor, features: Tensor,

@@ -110,11 +110,15 @@ class _CovarianceCPU(torch.autograd.Function):
 
 def quat_scale_to_covariance(quats: Tensor, scales: Tensor) -> Tensor:
     """quats [N, 4] wxyz (normalised here), scales [N, 3] (linear, metres) -> covariances [N, 3, 3] = R S Sᵀ Rᵀ;
-    by the C++ kernel for float32 CPU tensors where it builds, else by the PyTorch reference (same maths)."""
+    by the C++ kernel for float32 CPU tensors where it builds, by gsplat's for float32 CUDA tensors where it
+    is installed, else by the PyTorch reference (same maths)."""
     from glimpse.render.composite_cpu import kernel_applies
+    from glimpse.render.gsplat_backend import gsplat_ops_apply, quat_scale_to_covariance_gsplat
 
     if kernel_applies(quats, scales):
         return _CovarianceCPU.apply(quats, scales)
+    if quats.ndim == 2 and gsplat_ops_apply(quats, scales):
+        return quat_scale_to_covariance_gsplat(quats, scales)
     return quat_scale_to_covariance_torch(quats, scales)
 
 

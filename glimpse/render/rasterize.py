@@ -137,7 +137,8 @@ def _composite(name: str, projected: Projected, features: Tensor, camera: Camera
                            camera.width, camera.height)
 
 
-def _finish(image: Tensor, projected: Projected, background: Tensor | None, has_groups: bool, name: str) -> RenderOutput:
+def _finish(image: Tensor, projected: Projected, background: Tensor | None, has_groups: bool,
+            name: str) -> RenderOutput:
     alpha = image[..., 3]
     rgb = image[..., :3]
     if background is not None:

@@ -144,13 +144,18 @@ class _ShCPU(torch.autograd.Function):
 
 def sh_to_rgb(degree: int, sh_coeffs: Tensor, dirs: Tensor) -> Tensor:
     """:func:`sh_to_rgb_torch`, computed by the C++ kernel for float32 CPU tensors of shapes [N, K, C] and
-    [N, 3] where it builds (same maths, one pass instead of an autograd graph of elementwise kernels)."""
+    [N, 3] where it builds, by gsplat's for float32 CUDA tensors of shapes [N, K, 3] and [N, 3] where it is
+    installed (same maths, one pass instead of an autograd graph of elementwise kernels)."""
     from glimpse.render.composite_cpu import kernel_applies
+    from glimpse.render.gsplat_backend import SH_CHANNELS, gsplat_ops_apply, sh_to_rgb_gsplat
 
     num_coeffs = num_sh_coeffs(degree)
     if (sh_coeffs.ndim == 3 and dirs.ndim == 2 and dirs.shape == (sh_coeffs.shape[0], SPATIAL_DIMS)
-            and sh_coeffs.shape[1] >= num_coeffs and kernel_applies(sh_coeffs, dirs)):
-        return _ShCPU.apply(degree, sh_coeffs, dirs)
+            and sh_coeffs.shape[1] >= num_coeffs):
+        if kernel_applies(sh_coeffs, dirs):
+            return _ShCPU.apply(degree, sh_coeffs, dirs)
+        if sh_coeffs.shape[2] == SH_CHANNELS and gsplat_ops_apply(sh_coeffs, dirs):
+            return sh_to_rgb_gsplat(degree, sh_coeffs, dirs)
     return sh_to_rgb_torch(degree, sh_coeffs, dirs)
 
 
