@@ -129,7 +129,6 @@ def _scene_labels(labels: np.ndarray, people: list[PersonTrack], survey: Survey)
 def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: float, frames_done: int) -> dict:
     """The video's facts and the ingest's timings, for the tracks report (``frames_done``: frames a
     checkpoint had tracked before this run)."""
-    static_with_focal = survey.focal_35mm is not None and survey.static
     return {
         "video": str(video), "video_size": [survey.info.width, survey.info.height],
         "rotation_deg": survey.info.rotation_deg, "scene_size": [survey.width, survey.height],
@@ -139,8 +138,9 @@ def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: flo
         "frame_limit": config.max_frames if survey.limited else None,
         "camera_motion": "static" if survey.static else "moving", "camera_motion_measure": survey.motion.motion,
         "focal_35mm_equivalent": survey.focal_35mm,
-        "intrinsics": ("cameras.json from the container's focal length" if static_with_focal
-                       else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or SfM (moving)"),
+        "intrinsics": ("cameras.json from the container's focal length" if survey.focal_35mm is not None
+                       else "none written: stage 01 uses 01_sfm.static_fov_deg (static) or estimates the focal "
+                            "length in SfM (moving)"),
         "seconds": {"tracking": track_seconds},
         "resumed_after_frames": frames_done,
         "tracking_fps": (len(survey.chosen) - frames_done) / max(track_seconds, 1e-9),
@@ -226,7 +226,7 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
                            f"{config.track_min_frames} frames or more at {config.track_min_height:g} of the frame's "
                            "height or taller: ingest.track_min_frames, track_min_height); Glimpse reconstructs "
                            "people, so it needs a video with at least one person in view")
-    if survey.focal_35mm is not None and survey.static:  # a moving camera's K waits for stage 01's SfM
+    if survey.focal_35mm is not None:  # a moving camera's too: SfM keeps it (01_sfm.estimate_focal: its own)
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
     for person in people:

@@ -1,6 +1,7 @@
 """Structure from motion with pycolmap 4.x: SIFT on the CPU, sequential matching,
 incremental mapping with a pinhole camera (PINHOLE with K fixed when known, else
-SIMPLE_PINHOLE with its focal length estimated); or triangulation from known poses.
+SIMPLE_PINHOLE with its focal length estimated from the frame pairs first, glimpse.sfm.focal),
+and a last robust bundle adjustment; or triangulation from known poses (docs/cameras.md).
 
 People are cut out of feature extraction with COLMAP masks (black = no features).
 Known intrinsics are given to COLMAP and kept fixed. COLMAP's pixel convention
@@ -21,6 +22,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
 from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
 from glimpse.io.images import parse_frame_name, write_png
+from glimpse.sfm.focal import essential_cost, focal_from_pairs
 from glimpse.sfm.person_regions import PersonRegions
 
 log = logging.getLogger("glimpse")
@@ -32,8 +34,16 @@ class SfmOptions:
 
     max_features: int
     max_image_size: int
+    peak_threshold: float  # SIFT's DoG peak threshold (lower: more features on low-contrast surfaces)
+    domain_size_pooling: bool  # SIFT descriptors pooled over several scales (DSP-SIFT)
     sequential_overlap: int
     min_num_matches: int
+    refine: bool  # after mapping: drop badly reprojected points, bundle-adjust everything with a robust loss
+    refine_rounds: int
+    refine_max_error_px: float
+    refine_loss_scale_px: float
+    focal_min_pairs: int  # frame pairs with a fundamental matrix needed to self-calibrate the focal length
+    focal_fov_range_deg: tuple[float, float]  # fields of view (across the longer side) searched
     threads: int
     seed: int
     deterministic: bool  # COLMAP on one thread, so reruns give identical files
@@ -49,6 +59,7 @@ class SfmResult:
     rgb: np.ndarray
     num_models: int
     timings_s: dict[str, float] = field(default_factory=dict)
+    self_calibration: dict | None = None  # focal length from the frame pairs (intrinsics estimated only)
 
 
 def _write_colmap_masks(folder: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int]) -> None:
@@ -79,7 +90,7 @@ def _camera_K(camera: pycolmap.Camera) -> np.ndarray:
 
 def _extract_and_match(
     work: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int],
-    K: np.ndarray | None, options: SfmOptions, timings: dict[str, float],
+    K: np.ndarray, fixed_K: bool, options: SfmOptions, timings: dict[str, float],
 ) -> Path:
     """SIFT features (people masked) and sequential matches into ``work/database.db``."""
     pycolmap.logging.minloglevel = pycolmap.logging.Level.WARNING.value  # COLMAP's INFO lines flood the log
@@ -90,15 +101,19 @@ def _extract_and_match(
     _write_colmap_masks(mask_dir, frames, regions, shape)
     reader = pycolmap.ImageReaderOptions()
     reader.mask_path = mask_dir
-    if K is not None:  # known intrinsics, kept fixed
+    if fixed_K:  # known intrinsics, kept fixed
         reader.camera_model = "PINHOLE"
         reader.camera_params = _colmap_params(K)
-    else:  # square pixels, principal point at the centre: one focal length to estimate
+    else:  # square pixels, principal point at the centre: one focal length to estimate, starting from K's
         reader.camera_model = "SIMPLE_PINHOLE"
+        reader.camera_params = ",".join(f"{v:.12g}" for v in (K[0, 0], K[0, 2] + COLMAP_PIXEL_OFFSET,
+                                                              K[1, 2] + COLMAP_PIXEL_OFFSET))
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = _colmap_threads(options)  # image ids follow completion order
     extraction.max_image_size = options.max_image_size
     extraction.sift.max_num_features = options.max_features
+    extraction.sift.peak_threshold = options.peak_threshold
+    extraction.sift.domain_size_pooling = options.domain_size_pooling
     log.info("SfM: extracting SIFT features from %d frames", len(frames))
     start = time.perf_counter()
     pycolmap.extract_features(
@@ -165,16 +180,19 @@ def _result_from_reconstruction(rec: pycolmap.Reconstruction, num_models: int, t
 
 def run_sfm(
     work: Path, frames: dict[int, Path], regions: PersonRegions, shape: tuple[int, int],
-    K: np.ndarray | None, options: SfmOptions,
+    K: np.ndarray, fixed_K: bool, options: SfmOptions,
 ) -> SfmResult:
-    """Estimate every frame's camera; keep the largest model. K None: focal estimated."""
+    """Estimate every frame's camera; keep the largest model. K: the intrinsics, kept when ``fixed_K``, else
+    the starting point of the focal length's estimate."""
     work.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
-    database = _extract_and_match(work, frames, regions, shape, K, options, timings)
+    database = _extract_and_match(work, frames, regions, shape, K, fixed_K, options, timings)
+    self_calibration = None if fixed_K else _self_calibrate(database, shape, options)
     log.info("SfM: incremental mapping")
     start = time.perf_counter()
+    # An estimated focal length stays fixed while the model grows and is refined at the end (_refine)
     models = pycolmap.incremental_mapping(database, next(iter(frames.values())).parent, work / "sparse",
-                                          _pipeline_options(options, fixed_intrinsics=K is not None))
+                                          _pipeline_options(options, fixed_intrinsics=fixed_K or options.refine))
     timings["mapping"] = round(time.perf_counter() - start, 3)
     if not models:
         raise GlimpseError(
@@ -184,7 +202,60 @@ def run_sfm(
         )
     largest = max(models.values(), key=lambda rec: rec.num_reg_images())
     log.info("SfM: %d model(s); the largest registers %d of %d frames", len(models), largest.num_reg_images(), len(frames))
-    return _result_from_reconstruction(largest, len(models), timings)
+    if options.refine:
+        start = time.perf_counter()
+        _refine(largest, options, fixed_K)
+        timings["refinement"] = round(time.perf_counter() - start, 3)
+    result = _result_from_reconstruction(largest, len(models), timings)
+    result.self_calibration = self_calibration
+    return result
+
+
+def _self_calibrate(database: Path, shape: tuple[int, int], options: SfmOptions) -> dict:
+    """Set the database camera's focal length to the one its frame pairs' fundamental matrices agree on
+    (glimpse.sfm.focal) when at least ``options.focal_min_pairs`` pairs have one, else keep the start;
+    returns what was done."""
+    db = pycolmap.Database.open(database)
+    try:
+        _, geometries = db.read_two_view_geometries()
+        (camera,) = db.read_all_cameras()
+        start_focal, cx, cy = (float(v) for v in camera.params)
+        with_f = {pycolmap.TwoViewGeometryConfiguration.CALIBRATED, pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED}
+        fundamentals = np.array([g.F for g in geometries if g.config in with_f and np.abs(g.F).sum() > 0])
+        report = {"pairs": len(fundamentals), "start_focal_px": start_focal, "focal_px": None}
+        if len(fundamentals) >= options.focal_min_pairs:
+            report["focal_px"] = focal_from_pairs(essential_cost, fundamentals.reshape(-1, 3, 3), np.array([cx, cy]),
+                                                  max(shape), options.focal_fov_range_deg)
+            camera.params = [report["focal_px"], cx, cy]
+            db.update_camera(camera)
+    finally:
+        db.close()
+    if report["focal_px"] is None:
+        log.info("SfM: %d frame pairs with a fundamental matrix (< 01_sfm.focal_min_pairs %d): the focal length "
+                 "starts at %.1f px (01_sfm.static_fov_deg)", report["pairs"], options.focal_min_pairs, start_focal)
+    else:
+        log.info("SfM: focal length %.1f px from %d frame pairs (start %.1f px)", report["focal_px"], report["pairs"],
+                 start_focal)
+    return report
+
+
+def _refine(rec: pycolmap.Reconstruction, options: SfmOptions, fixed_K: bool) -> None:
+    """``options.refine_rounds`` times: drop the points whose mean reprojection error exceeds
+    ``options.refine_max_error_px``, then bundle-adjust every pose and point (and the focal length unless
+    ``fixed_K``) with a robust (Cauchy) loss."""
+    ba = pycolmap.BundleAdjustmentOptions()
+    ba.refine_focal_length = not fixed_K
+    ba.refine_principal_point = False
+    ba.refine_extra_params = False
+    ba.print_summary = False
+    ba.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+    ba.ceres.loss_function_scale = options.refine_loss_scale_px
+    ba.ceres.solver_options.num_threads = _colmap_threads(options)
+    for _ in range(options.refine_rounds):
+        rec.update_point_3d_errors()
+        for point_id in [i for i, point in rec.points3D.items() if point.error > options.refine_max_error_px]:
+            rec.delete_point3D(point_id)
+        pycolmap.bundle_adjustment(rec, ba)
 
 
 def triangulate_known_poses(
@@ -195,7 +266,7 @@ def triangulate_known_poses(
     work.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
     first_K = next(iter(cameras.values())).K
-    database = _extract_and_match(work, frames, regions, shape, first_K, options, timings)
+    database = _extract_and_match(work, frames, regions, shape, first_K, True, options, timings)
     start = time.perf_counter()
     db = pycolmap.Database.open(database)
     try:

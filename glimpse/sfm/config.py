@@ -21,7 +21,16 @@ class CamerasConfig:
     keypoint_box_margin: float
     sift_max_features: int
     sift_max_image_size: int
+    sift_peak_threshold: float
+    sift_domain_size_pooling: bool
     sequential_overlap: int
     min_num_matches: int
+    refine: bool
+    refine_rounds: int
+    refine_max_error_px: float
+    refine_loss_scale_px: float
+    focal_min_pairs: int
+    focal_fov_range_deg: list[float]
     min_registered_fraction: float
+    estimate_focal: bool
     deterministic: bool

@@ -101,7 +101,11 @@ def _sfm_options(config: CamerasConfig, threads: int, seed: int) -> SfmOptions:
 
     return SfmOptions(
         max_features=config.sift_max_features, max_image_size=config.sift_max_image_size,
-        sequential_overlap=config.sequential_overlap, min_num_matches=config.min_num_matches,
+        peak_threshold=config.sift_peak_threshold, domain_size_pooling=config.sift_domain_size_pooling,
+        sequential_overlap=config.sequential_overlap,
+        min_num_matches=config.min_num_matches, refine=config.refine, refine_rounds=config.refine_rounds,
+        refine_max_error_px=config.refine_max_error_px, refine_loss_scale_px=config.refine_loss_scale_px,
+        focal_min_pairs=config.focal_min_pairs, focal_fov_range_deg=tuple(config.focal_fov_range_deg),
         threads=threads, seed=seed, deterministic=config.deterministic,
     )
 
@@ -169,18 +173,21 @@ def estimate_cameras(
 
     # sfm
     known_K = None
-    if scene.cameras is not None:
+    if scene.cameras is not None and not config.estimate_focal:
         per_frame_K = {fid: c.K for fid, c in given.items()}
         if any(not np.allclose(k, scene.cameras.K) for k in per_frame_K.values()):
             raise GlimpseError("01_sfm.mode=sfm with per-frame K (zoom) is not supported: use mode provided")
         known_K = scene.cameras.K
     from glimpse.sfm.colmap import run_sfm
 
-    result = run_sfm(work, frames, regions, shape, known_K, _sfm_options(config, threads, seed))
+    start_K = known_K if known_K is not None else default_intrinsics(scene.width, scene.height, config.static_fov_deg)
+    result = run_sfm(work, frames, regions, shape, start_K, known_K is not None, _sfm_options(config, threads, seed))
     registered = len(result.cameras) / len(frame_ids)
     sfm_report = {"masking": list(regions.sources), "models": result.num_models, "registered": len(result.cameras),
                   "frames": len(frame_ids), "intrinsics": "fixed (cameras.json)" if known_K is not None else "estimated",
                   "points": int(len(result.xyz))}
+    if result.self_calibration is not None:
+        sfm_report["self_calibration"] = result.self_calibration
     if registered < config.min_registered_fraction:
         missing = [fid for fid in frame_ids if fid not in result.cameras]
         raise GlimpseError(
@@ -193,6 +200,9 @@ def estimate_cameras(
     if given:
         cameras, xyz, sfm_report["error"] = _align_to_given(cameras, xyz, given)
         units = "metres"
+        if known_K is None:  # focal estimated, a true one given: how far off
+            estimated = next(iter(result.cameras.values())).K[0, 0]
+            sfm_report["error"]["focal_relative"] = float(estimated / scene.cameras.K[0, 0] - 1)
     return CamerasOutcome(mode, reason, "moving", cameras=cameras, units=units, xyz=xyz, rgb=result.rgb,
                           motion=motion, sfm=sfm_report, warnings=warnings, timings_s=result.timings_s, **outcome_args)
 
