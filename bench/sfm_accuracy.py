@@ -1,9 +1,9 @@
 """Stage 01's structure from motion against the truth, on moving-camera fixtures (glimpse.fixtures, size
 ``sfm``: 256x192, 48 frames over 3 s; people masked from their masks).
 
-For every fixture and seed, four variants: frames as rendered (PNG) or saved as JPEG (quality
-JPEG_QUALITY, as a phone writes them), and intrinsics given (cameras.json's K, fixed) or withheld (the
-focal length estimated: ``01_sfm.estimate_focal=true``). The fixture's true poses stay in cameras.json, so
+For every fixture and seed, four variants: frames as rendered (PNG) or saved as JPEG (quality 90, as a
+phone writes them: glimpse.fixtures.scenes.save_frames_as_jpeg), and intrinsics given (cameras.json's K,
+fixed) or withheld (the focal length estimated: ``01_sfm.estimate_focal=true``). The fixture's true poses stay in cameras.json, so
 stage 01 aligns its result to them by a similarity and reports the residual: camera-centre RMS and maximum
 (metres, the fixture's units), the largest rotation error (degrees) and the estimated focal length's
 relative error. Targets: every frame registered; centre RMS <= 1 cm and rotations <= 0.5 degrees with
@@ -19,15 +19,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from glimpse.fixtures.scenes import make_scene  # noqa: E402
+from glimpse.fixtures.scenes import make_scene, save_frames_as_jpeg  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
 
 SIZE = "sfm"
-JPEG_QUALITY = 90
 FIXTURES = ("moving_camera", "follow_camera")
 VARIANTS = (("png", False), ("jpeg", False), ("png", True), ("jpeg", True))  # (frames, focal estimated)
 
@@ -36,9 +33,7 @@ def as_jpeg(scene: Path, out: Path) -> Path:
     """A copy of ``scene`` whose frames are JPEG files (the PNGs re-encoded)."""
     if not out.exists():
         shutil.copytree(scene, out)
-        for png in sorted((out / "frames").glob("*.png")):
-            cv2.imwrite(str(png.with_suffix(".jpg")), cv2.imread(str(png)), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-            png.unlink()
+        save_frames_as_jpeg(out)
     return out
 
 

@@ -5,7 +5,7 @@ size from JPEG frames without intrinsics (about 30 s)."""
 
 import numpy as np
 
-from glimpse.fixtures.scenes import make_scene
+from glimpse.fixtures.scenes import make_scene, save_frames_as_jpeg
 from glimpse.io.cameras_json import read_cameras_json
 from tests.stage_helpers import read_json, run
 
@@ -29,12 +29,8 @@ def test_sfm_follows_a_walker_in_a_low_texture_room_from_jpeg_frames_without_int
     at the benchmark's size, frames saved as JPEG, the focal length withheld: every frame registered, the
     focal length within 2% and the centres within 2 cm RMS (docs/cameras.md; COLMAP's own settings gave
     5.5 cm and +5.6% on this scene)."""
-    import cv2
-
     scene = make_scene("follow_camera", tmp_path / "follow_camera", "sfm", seed=0)
-    for png in sorted((scene / "frames").glob("*.png")):
-        cv2.imwrite(str(png.with_suffix(".jpg")), cv2.imread(str(png)), [cv2.IMWRITE_JPEG_QUALITY, 90])
-        png.unlink()
+    save_frames_as_jpeg(scene)
     out = run("01_sfm", scene, tmp_path / "out", "01_sfm.mode=sfm 01_sfm.estimate_focal=true")
     report = read_json(out / "report.json")
     assert report["frames_with_camera"] == report["frames"] == 48

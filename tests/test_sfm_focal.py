@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from glimpse.sfm.focal import essential_cost, focal_for_fov, focal_from_pairs
+from glimpse.render.projection import fov_to_focal
+from glimpse.sfm.focal import essential_cost, focal_from_fundamentals
 
 WIDTH, HEIGHT = 320, 240
 FOV_RANGE = (20.0, 120.0)
@@ -47,28 +48,28 @@ def random_pairs(focal: float, count: int, seed: int, noise_px: float) -> np.nda
 
 @pytest.mark.parametrize("fov_deg", [40.0, 70.0, 95.0])
 def test_focal_from_exact_fundamental_matrices(fov_deg):
-    focal = focal_for_fov(fov_deg, WIDTH)
+    focal = fov_to_focal(fov_deg, WIDTH)
     fundamentals = random_pairs(focal, 20, seed=int(fov_deg), noise_px=0.0)
-    found = focal_from_pairs(essential_cost, fundamentals, np.array([WIDTH / 2, HEIGHT / 2]), WIDTH, FOV_RANGE)
+    found = focal_from_fundamentals(fundamentals, np.array([WIDTH / 2, HEIGHT / 2]), WIDTH, FOV_RANGE)
     assert found == pytest.approx(focal, rel=1e-3)
     assert essential_cost(focal, fundamentals, np.array([WIDTH / 2, HEIGHT / 2])) < 1e-6
 
 
 @pytest.mark.parametrize("fov_deg", [45.0, 80.0])
 def test_focal_from_noisy_fundamental_matrices_is_within_two_percent(fov_deg):
-    focal = focal_for_fov(fov_deg, WIDTH)
+    focal = fov_to_focal(fov_deg, WIDTH)
     centre = np.array([WIDTH / 2, HEIGHT / 2])
     fundamentals = random_pairs(focal, 40, seed=1, noise_px=0.5)
-    found = focal_from_pairs(essential_cost, fundamentals, centre, WIDTH, FOV_RANGE)
+    found = focal_from_fundamentals(fundamentals, centre, WIDTH, FOV_RANGE)
     assert found == pytest.approx(focal, rel=0.02)
     # the default start (60 degrees) would be 20-40% off here
-    assert abs(focal_for_fov(60.0, WIDTH) / focal - 1) > 0.2
+    assert abs(fov_to_focal(60.0, WIDTH) / focal - 1) > 0.2
 
 
 def test_the_search_stays_in_its_range_and_needs_pairs():
-    focal = focal_for_fov(70.0, WIDTH)
+    focal = fov_to_focal(70.0, WIDTH)
     fundamentals = random_pairs(focal, 10, seed=3, noise_px=0.0)
-    narrow = focal_from_pairs(essential_cost, fundamentals, np.array([WIDTH / 2, HEIGHT / 2]), WIDTH, (20.0, 50.0))
-    assert focal_for_fov(50.0, WIDTH) * 0.999 <= narrow <= focal_for_fov(20.0, WIDTH) * 1.001
+    narrow = focal_from_fundamentals(fundamentals, np.array([WIDTH / 2, HEIGHT / 2]), WIDTH, (20.0, 50.0))
+    assert fov_to_focal(50.0, WIDTH) * 0.999 <= narrow <= fov_to_focal(20.0, WIDTH) * 1.001
     with pytest.raises(ValueError, match="at least one"):
-        focal_from_pairs(essential_cost, np.zeros((0, 3, 3)), np.zeros(2), WIDTH, FOV_RANGE)
+        focal_from_fundamentals(np.zeros((0, 3, 3)), np.zeros(2), WIDTH, FOV_RANGE)

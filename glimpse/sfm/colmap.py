@@ -22,7 +22,7 @@ from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
 from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
 from glimpse.io.images import parse_frame_name, write_png
-from glimpse.sfm.focal import essential_cost, focal_from_pairs
+from glimpse.sfm.focal import focal_from_fundamentals
 from glimpse.sfm.person_regions import PersonRegions
 
 log = logging.getLogger("glimpse")
@@ -70,10 +70,10 @@ def _write_colmap_masks(folder: Path, frames: dict[int, Path], regions: PersonRe
         write_png(folder / f"{path.name}.png", allowed.astype(np.uint8) * 255)
 
 
-def _colmap_params(K: np.ndarray) -> str:
-    return ",".join(
-        f"{v:.12g}" for v in (K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET)
-    )
+def _colmap_params(K: np.ndarray, model: str) -> str:
+    """COLMAP's parameter string of a PINHOLE (fx, fy, cx, cy) or SIMPLE_PINHOLE (f, cx, cy) camera with K."""
+    focal = (K[0, 0], K[1, 1]) if model == "PINHOLE" else (K[0, 0],)
+    return ",".join(f"{v:.12g}" for v in (*focal, K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET))
 
 
 def _camera_K(camera: pycolmap.Camera) -> np.ndarray:
@@ -101,13 +101,11 @@ def _extract_and_match(
     _write_colmap_masks(mask_dir, frames, regions, shape)
     reader = pycolmap.ImageReaderOptions()
     reader.mask_path = mask_dir
-    if fixed_K:  # known intrinsics, kept fixed
-        reader.camera_model = "PINHOLE"
-        reader.camera_params = _colmap_params(K)
-    else:  # square pixels, principal point at the centre: one focal length to estimate, starting from K's
-        reader.camera_model = "SIMPLE_PINHOLE"
-        reader.camera_params = ",".join(f"{v:.12g}" for v in (K[0, 0], K[0, 2] + COLMAP_PIXEL_OFFSET,
-                                                              K[1, 2] + COLMAP_PIXEL_OFFSET))
+    # known intrinsics, kept fixed; else square pixels, principal point at the centre: one focal length to
+    # estimate, starting from K's
+    model = "PINHOLE" if fixed_K else "SIMPLE_PINHOLE"
+    reader.camera_model = model
+    reader.camera_params = _colmap_params(K, model)
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = _colmap_threads(options)  # image ids follow completion order
     extraction.max_image_size = options.max_image_size
@@ -224,8 +222,8 @@ def _self_calibrate(database: Path, shape: tuple[int, int], options: SfmOptions)
         fundamentals = np.array([g.F for g in geometries if g.config in with_f and np.abs(g.F).sum() > 0])
         report = {"pairs": len(fundamentals), "start_focal_px": start_focal, "focal_px": None}
         if len(fundamentals) >= options.focal_min_pairs:
-            report["focal_px"] = focal_from_pairs(essential_cost, fundamentals.reshape(-1, 3, 3), np.array([cx, cy]),
-                                                  max(shape), options.focal_fov_range_deg)
+            report["focal_px"] = focal_from_fundamentals(fundamentals.reshape(-1, 3, 3), np.array([cx, cy]),
+                                                         max(shape), options.focal_fov_range_deg)
             camera.params = [report["focal_px"], cx, cy]
             db.update_camera(camera)
     finally:

@@ -17,18 +17,14 @@ keeping f fixed until a last bundle adjustment does not (docs/cameras.md).
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
+
+from glimpse.render.projection import fov_to_focal
 
 GRID_STEPS = 200  # log-spaced focal lengths tried before the golden-section refinement
 GOLDEN_ITERATIONS = 40
 GOLDEN = (math.sqrt(5) - 1) / 2
-
-
-def focal_for_fov(fov_deg: float, side_px: float) -> float:
-    """Focal length (pixels) of a field of view ``fov_deg`` across ``side_px`` pixels."""
-    return 0.5 * side_px / math.tan(math.radians(fov_deg) / 2)
 
 
 def _intrinsics(focal: float, principal_point: np.ndarray) -> np.ndarray:
@@ -43,19 +39,19 @@ def essential_cost(focal: float, fundamentals: np.ndarray, principal_point: np.n
     return float(np.median((s[:, 0] - s[:, 1]) / np.maximum(s[:, 0] + s[:, 1], 1e-300)))
 
 
-def focal_from_pairs(cost: Callable[[float, np.ndarray, np.ndarray], float], matrices: np.ndarray,
-                     principal_point: np.ndarray, side_px: float, fov_range_deg: tuple[float, float]) -> float:
-    """The focal length (pixels) minimising ``cost`` (:func:`essential_cost` over fundamental matrices
-    [P, 3, 3], P >= 1), searched between the fields of view
-    ``fov_range_deg`` (degrees across ``side_px`` pixels): a log-spaced grid, then golden-section search."""
-    if len(matrices) == 0:
-        raise ValueError("focal_from_pairs needs at least one frame pair's matrix")
+def focal_from_fundamentals(fundamentals: np.ndarray, principal_point: np.ndarray, side_px: int,
+                            fov_range_deg: tuple[float, float]) -> float:
+    """The focal length (pixels) minimising :func:`essential_cost` over ``fundamentals`` [P, 3, 3], P >= 1,
+    searched between the fields of view ``fov_range_deg`` (degrees across ``side_px`` pixels): a log-spaced
+    grid, then golden-section search."""
+    if len(fundamentals) == 0:
+        raise ValueError("focal_from_fundamentals needs at least one frame pair's fundamental matrix")
 
     def at(log_focal: float) -> float:
-        return cost(math.exp(log_focal), matrices, principal_point)
+        return essential_cost(math.exp(log_focal), fundamentals, principal_point)
 
     wide, narrow = max(fov_range_deg), min(fov_range_deg)
-    grid = np.log(np.geomspace(focal_for_fov(wide, side_px), focal_for_fov(narrow, side_px), GRID_STEPS))
+    grid = np.log(np.geomspace(fov_to_focal(wide, side_px), fov_to_focal(narrow, side_px), GRID_STEPS))
     best = int(np.argmin([at(g) for g in grid]))
     lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
     a, b = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
