@@ -4,7 +4,7 @@
                                          masks), a preview video and a tracks report (docs/ingest.md); SCENE_DIR
                                          defaults to OUT/scenes/<video name>
   glimpse import DATASET SOURCE SCENE_DIR [--sequence S] [--cameras IN,HELD,...] [--frames A:B[:STEP]]
-                                         a dataset's sequence -> a scene: zju-mocap, panoptic, emdb, hi4d
+                                         a dataset's sequence -> a scene: zju-mocap, panoptic, emdb, hi4d, neuman
                                          (docs/datasets.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     p_ingest.add_argument("--out", type=Path, default=Path("runs"), help="output root, for the default scene folder")
     p_ingest.add_argument("--params", default=_params_default(), help='overrides "ingest.key=value ..." (env GLIMPSE_PARAMS)')
     p_import = command("import", "a dataset's sequence -> a glimpse-scene/1 folder (docs/datasets.md)")
-    p_import.add_argument("dataset", help="zju-mocap | panoptic | emdb | hi4d")
+    p_import.add_argument("dataset", help="zju-mocap | panoptic | emdb | hi4d | neuman")
     p_import.add_argument("source", type=Path, help="the dataset's folder (with --sequence) or one sequence's")
     p_import.add_argument("scene", type=Path, help="the scene folder to write (replaced when the import succeeds)")
     p_import.add_argument("--sequence", default=None,

@@ -167,7 +167,7 @@ def test_bad_sources_get_one_message(tmp_path, imported, capsys):
         import_dataset("zju-mocap", imported[2], tmp_path / "s", ImportOptions(cameras=("7",),
                                                                                 body_models={"neutral": imported[1]}))
     assert cli(["import", "hi5d", str(tmp_path), str(tmp_path / "s")]) == EXIT_BAD_INPUT
-    assert "Glimpse imports emdb, hi4d, panoptic, zju-mocap" in capsys.readouterr().err
+    assert "Glimpse imports emdb, hi4d, neuman, panoptic, zju-mocap" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
 
 

@@ -10,12 +10,13 @@ from glimpse.errors import GlimpseError
 from glimpse.importers.common import ImportOptions
 from glimpse.importers.emdb import import_emdb
 from glimpse.importers.hi4d import import_hi4d
+from glimpse.importers.neuman import import_neuman
 from glimpse.importers.panoptic import import_panoptic
 from glimpse.importers.zju_mocap import import_zju_mocap
 
 Importer = Callable[[Path, Path, ImportOptions], Path]
 DATASETS: dict[str, Importer] = {"zju-mocap": import_zju_mocap, "panoptic": import_panoptic, "emdb": import_emdb,
-                                 "hi4d": import_hi4d}
+                                 "hi4d": import_hi4d, "neuman": import_neuman}
 
 
 def import_dataset(dataset: str, source: Path, scene_dir: Path, options: ImportOptions) -> Path:

@@ -10,7 +10,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from scipy.spatial.transform import Rotation
+
 from glimpse.body.config import peek_body_model_kind
+from glimpse.body.model_file import load_body_model_file
 from glimpse.cameras.undistort import Undistorter
 from glimpse.errors import GlimpseError
 from glimpse.scene.writer import SceneWriter
@@ -89,6 +92,26 @@ def smpl_model_file(options: ImportOptions, dataset: str, gender: str = "neutral
         raise GlimpseError(f"--body-model {path}: not an SMPL model (it is a free-body file); {dataset}'s parameters "
                            "are SMPL's")
     return path
+
+
+def rest_pelvis(model_file: Path, betas: np.ndarray) -> np.ndarray:
+    """(3,) the pelvis of the body shaped by ``betas`` in its rest pose (about which smplx turns
+    global_orient)."""
+    data = load_body_model_file(model_file)
+    shaped = data.v_template + data.shapedirs[:, :, : len(betas)] @ betas
+    return data.J_regressor[0] @ shaped
+
+
+def pelvis_placed_smpl(global_orient: np.ndarray, turn: Rotation, shift: np.ndarray, scale: np.ndarray,
+                       source_pelvis: np.ndarray, pelvis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """smplx's (global_orient [T, 3], transl [T, 3]) for a dataset that places a body as
+    ``scale · turn · SMPL(global_orient, ..., transl=0) + shift`` per frame (turn: T rotations, shift [T, 3],
+    scale [T]; source_pelvis [3] or [T, 3] its rest pelvis, under the source's shape). The scene's body turns
+    about its rest ``pelvis`` [3] at unit scale, so its pelvis lands exactly where the source's does; the rest
+    of the body is off by (scale - 1) times its distance from the pelvis (0 where scale is 1)."""
+    orient = (turn * Rotation.from_rotvec(global_orient)).as_rotvec()
+    transl = scale[:, None] * turn.apply(np.array(np.broadcast_to(source_pelvis, shift.shape))) + shift - pelvis
+    return orient, transl
 
 
 def nonzero_mask(path: Path) -> np.ndarray | None:

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from glimpse.body.model_file import load_body_model_file
 from glimpse.errors import GlimpseError
-from glimpse.importers.common import HeldOutCamera, ImportOptions, camera_name, nonzero_mask, smpl_model_file
+from glimpse.importers.common import (HeldOutCamera, ImportOptions, camera_name, nonzero_mask, pelvis_placed_smpl,
+                                      rest_pelvis, smpl_model_file)
 from glimpse.io.images import read_rgb
 from glimpse.io.numpy_pickle import load_object_npy
 from glimpse.io.progress import progress
@@ -97,23 +97,6 @@ def person_mask(folder: Path, image_path: str) -> np.ndarray:
     return np.logical_or.reduce(found)
 
 
-def rest_pelvis(model_file: Path, betas: np.ndarray) -> np.ndarray:
-    """(3,) the pelvis of the shaped body in its rest pose (about which smplx turns global_orient)."""
-    data = load_body_model_file(model_file)
-    shaped = data.v_template + data.shapedirs[:, :, : len(betas)] @ betas
-    return data.J_regressor[0] @ shaped
-
-
-def standard_smpl(poses: np.ndarray, Rh: np.ndarray, Th: np.ndarray, pelvis: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """EasyMocap's (poses [T, 72], Rh [T, 3], Th [T, 3]) -> smplx's (global_orient [T, 3], body_pose [T, 69],
-    transl [T, 3]) for a body whose rest pelvis is ``pelvis`` (3,)."""
-    turn = Rotation.from_rotvec(Rh)
-    global_orient = (turn * Rotation.from_rotvec(poses[:, :3])).as_rotvec()
-    transl = Th + turn.apply(pelvis) - pelvis
-    return global_orient, poses[:, 3:72].copy(), transl
-
-
 def pick_cameras(requested: tuple[str, ...] | None, names: list[str]) -> tuple[int, list[int]]:
     """(input camera, held-out cameras) as indices into ``names``: ``requested`` lists the input first, each an
     index (0 = the first camera of annots.npy, as Neural Body and HumanNeRF count) or a folder name; default:
@@ -146,7 +129,9 @@ def import_zju_mocap(source: Path, scene_dir: Path, options: ImportOptions) -> P
         raise GlimpseError(f"--frames selects no frame of {folder.name} ({len(images)} frames)")
     params = read_bodies(folder, [images[p][source_camera] for p in positions])
     pelvis = rest_pelvis(model_file, params["shapes"][0])
-    global_orient, body_pose, transl = standard_smpl(params["poses"], params["Rh"], params["Th"], pelvis)
+    global_orient, transl = pelvis_placed_smpl(params["poses"][:, :3], Rotation.from_rotvec(params["Rh"]),
+                                               params["Th"], np.ones(len(positions)), pelvis, pelvis)
+    body_pose = params["poses"][:, 3:72]
 
     writer = SceneWriter(scene_dir, name=f"zju_{folder.name}", fps=options.fps or DEFAULT_FPS,
                          camera_motion="static", body_model="smpl",

@@ -19,10 +19,7 @@ from scipy.spatial.transform import Rotation
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
 from glimpse.io.cameras_json import read_cameras_json
-from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
-
-PINHOLE_MODELS = ("SIMPLE_PINHOLE", "PINHOLE")  # COLMAP params: (f, cx, cy) and (fx, fy, cx, cy)
-
+from glimpse.io.colmap_model import PINHOLE_MODELS, read_colmap_model
 
 def mean_up(cameras: list[PinholeCamera]) -> np.ndarray:
     """(3,) unit world vector: the mean of the cameras' up directions (OpenCV cameras: -y)."""
@@ -59,23 +56,9 @@ def json_path(path: Path) -> list[PinholeCamera]:
 
 def colmap_path(folder: Path) -> list[PinholeCamera]:
     """Every image of a COLMAP model (text or binary), in name order; pinhole camera models only."""
-    import pycolmap
-
-    if not folder.is_dir():
-        raise GlimpseError(f"{folder}: no COLMAP model folder (cameras.txt/images.txt or .bin)")
-    model = pycolmap.Reconstruction(str(folder))
-    shots = []
-    for image in sorted(model.images.values(), key=lambda i: i.name):
-        camera = model.cameras[image.camera_id]
-        if camera.model.name not in PINHOLE_MODELS:
-            raise GlimpseError(f"{folder}: camera {image.camera_id} is {camera.model.name}; only "
+    shots = read_colmap_model(folder)
+    for shot in shots:
+        if shot.model not in PINHOLE_MODELS:
+            raise GlimpseError(f"{folder}: image {shot.name} has a {shot.model} camera; only "
                                f"{' and '.join(PINHOLE_MODELS)} can be rendered (undistort the model first)")
-        params = list(camera.params)
-        fx, fy, cx, cy = (params[0], *params) if camera.model.name == "SIMPLE_PINHOLE" else params
-        K = np.array([[fx, 0.0, cx - COLMAP_PIXEL_OFFSET], [0.0, fy, cy - COLMAP_PIXEL_OFFSET], [0.0, 0.0, 1.0]])
-        pose = image.cam_from_world()
-        shots.append(PinholeCamera(K, pose.rotation.matrix(), np.asarray(pose.translation), camera.width,
-                                   camera.height))
-    if not shots:
-        raise GlimpseError(f"{folder}: the COLMAP model has no image")
-    return shots
+    return [PinholeCamera(shot.K, shot.R, shot.t, shot.width, shot.height) for shot in shots]

@@ -20,6 +20,7 @@ import pycolmap
 
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
+from glimpse.io.colmap_model import PINHOLE_MODELS, colmap_intrinsics
 from glimpse.io.colmap_text import COLMAP_PIXEL_OFFSET
 from glimpse.io.images import parse_frame_name, write_png
 from glimpse.sfm.focal import focal_from_fundamentals
@@ -78,14 +79,9 @@ def _colmap_params(K: np.ndarray, model: str) -> str:
 
 def _camera_K(camera: pycolmap.Camera) -> np.ndarray:
     """(3, 3) OpenCV K of a COLMAP PINHOLE or SIMPLE_PINHOLE camera."""
-    if camera.model_name == "SIMPLE_PINHOLE":
-        f, cx, cy = camera.params
-        fx = fy = f
-    elif camera.model_name == "PINHOLE":
-        fx, fy, cx, cy = camera.params
-    else:
+    if camera.model_name not in PINHOLE_MODELS:
         raise GlimpseError(f"COLMAP returned a {camera.model_name} camera; expected a pinhole model")
-    return np.array([[fx, 0, cx - COLMAP_PIXEL_OFFSET], [0, fy, cy - COLMAP_PIXEL_OFFSET], [0, 0, 1.0]])
+    return colmap_intrinsics(camera.model_name, [float(p) for p in camera.params], "COLMAP's camera")[0]
 
 
 def _extract_and_match(
