@@ -196,6 +196,9 @@ def import_neuman(source: Path, scene_dir: Path, options: ImportOptions) -> Path
     folder = sequence_folder(source, options.sequence)
     model_file = smpl_model_file(options, DATASET)
     shots = read_colmap_model(folder / "sparse")
+    if any(not np.array_equal(s.K, shots[0].K) or (s.width, s.height) != (shots[0].width, shots[0].height)
+           for s in shots):
+        raise GlimpseError(f"{folder / 'sparse'}: several cameras; NeuMan's sequences have one (single_camera)")
     bodies = neuman_bodies(folder, shots) or hugs_bodies(folder, shots)
     if bodies is None:
         raise GlimpseError(f"{folder}: no bodies: give {' or '.join(SMPL_FILES)} with alignments.npy, or {HUGS_SMPL}")
@@ -210,41 +213,26 @@ def import_neuman(source: Path, scene_dir: Path, options: ImportOptions) -> Path
     if not with_body:
         raise GlimpseError(f"{folder}: no training frame of the chosen span has a body ({bodies.source})")
     world_scale = float(np.median(bodies.scale[with_body]))  # COLMAP units per metre
+    numbers = [frame_number(shot.name) for shot in shots]
+    poses = {p: CameraPose(shots[p].R, shots[p].t / world_scale) for p in range(len(shots))}
 
     writer = SceneWriter(scene_dir, name=f"neuman_{folder.name}", fps=options.fps or DEFAULT_FPS,
                          camera_motion="moving", body_model="smpl", overrides={"body": {"model_path": str(model_file)}})
-    first = shots[inputs[0]]
-    for position in progress(inputs, desc=f"{DATASET} {folder.name}", unit="frame"):
-        shot = shots[position]
-        writer.frame(frame_number(shot.name), read_rgb(folder / "images" / shot.name))
-        writer.person_mask(PID, frame_number(shot.name), person_mask(folder, shot.name, position))
-    pose_of = {frame_number(s.name): CameraPose(s.R, s.t / world_scale) for s in shots}
-    writer.input_cameras(first.width, first.height, first.K, first.dist,
-                         poses={frame_number(shots[p].name): pose_of[frame_number(shots[p].name)] for p in inputs})
+    camera = shots[0]
+    for p in progress(inputs, desc=f"{DATASET} {folder.name}", unit="frame"):
+        writer.frame(numbers[p], read_rgb(folder / "images" / shots[p].name))
+        writer.person_mask(PID, numbers[p], person_mask(folder, shots[p].name, p))
+    writer.input_cameras(camera.width, camera.height, camera.K, camera.dist,
+                         poses={numbers[p]: poses[p] for p in inputs})
     keypoints = [coco_keypoints(folder, shots[p].name) for p in inputs]
     if any(k is not None for k in keypoints):  # a frame without a file: every point missing (confidence 0)
-        writer.keypoints2d(PID, np.asarray([frame_number(shots[p].name) for p in inputs]), "coco17",
+        writer.keypoints2d(PID, np.asarray([numbers[p] for p in inputs]), "coco17",
                            np.stack([np.zeros((17, 3)) if k is None else k for k in keypoints]))
-
-    betas = bodies.betas[with_body].mean(axis=0)
-    source_pelvis = np.stack([rest_pelvis(model_file, b) for b in bodies.betas[with_body]])
     relative_scale = bodies.scale[with_body] / world_scale
-    global_orient, transl = pelvis_placed_smpl(
-        bodies.global_orient[with_body], bodies.turn[with_body], bodies.shift[with_body] / world_scale,
-        relative_scale, source_pelvis, rest_pelvis(model_file, betas))
-    writer.smpl(PID, np.asarray([frame_number(shots[bodies.positions[row]].name) for row in with_body]), betas,
-                global_orient, bodies.body_pose[with_body], transl)
-
+    betas = write_bodies(writer, model_file, bodies, with_body, world_scale,
+                         [numbers[bodies.positions[row]] for row in with_body])
     if scored:
-        undistorter = Undistorter(first.K, first.dist, first.width, first.height)
-        test_poses = {frame_number(shots[p].name): pose_of[frame_number(shots[p].name)] for p in scored}
-        start = test_poses[min(test_poses)]
-        writer.eval_camera(HELD_OUT_CAMERA, first.width, first.height, first.K, start.R, start.t, poses=test_poses)
-        for position in progress(scored, desc=f"{DATASET} {folder.name} test frames", unit="frame"):
-            shot = shots[position]
-            mask = undistorter.mask(person_mask(folder, shot.name, position))
-            writer.eval_view(HELD_OUT_CAMERA, frame_number(shot.name),
-                             undistorter.image(read_rgb(folder / "images" / shot.name)), mask, {PID: mask})
+        write_test_views(writer, folder, camera, {numbers[p]: (p, poses[p]) for p in scored}, shots)
     report = {"bodies": bodies.source, "colmap_units_per_metre": world_scale,
               "body_scale_relative": {"min": float(relative_scale.min()), "max": float(relative_scale.max())},
               "betas_spread": float(np.abs(bodies.betas[with_body] - betas).max()),
@@ -252,3 +240,32 @@ def import_neuman(source: Path, scene_dir: Path, options: ImportOptions) -> Path
                          "validation (left out)": len([p for p in validation if p in chosen])}}
     writer.side_file(REPORT_FILE).write_text(json.dumps(report, indent=2))
     return writer.finish()
+
+
+def write_bodies(writer: SceneWriter, model_file: Path, bodies: PlacedBodies, rows: list[int], world_scale: float,
+                 numbers: list[int]) -> np.ndarray:
+    """smpl.npz of the bodies' ``rows`` (frame ``numbers``) in the scene's world (COLMAP's / world_scale): the
+    mean betas, each pelvis where the source puts it; returns the betas."""
+    betas = bodies.betas[rows].mean(axis=0)
+    source_pelvis = np.stack([rest_pelvis(model_file, b) for b in bodies.betas[rows]])
+    global_orient, transl = pelvis_placed_smpl(
+        bodies.global_orient[rows], bodies.turn[rows], bodies.shift[rows] / world_scale,
+        bodies.scale[rows] / world_scale, source_pelvis, rest_pelvis(model_file, betas))
+    writer.smpl(PID, np.asarray(numbers), betas, global_orient, bodies.body_pose[rows], transl)
+    return betas
+
+
+def write_test_views(writer: SceneWriter, folder: Path, camera: ColmapShot,
+                     scored: dict[int, tuple[int, CameraPose]], shots: list[ColmapShot]) -> None:
+    """eval/video_test/: the test frames (frame number -> (position, pose)) as views of the moving input
+    camera, undistorted to its K, with the person's mask."""
+    undistorter = Undistorter(camera.K, camera.dist, camera.width, camera.height)
+    start = scored[min(scored)][1]
+    writer.eval_camera(HELD_OUT_CAMERA, camera.width, camera.height, camera.K, start.R, start.t,
+                       poses={number: pose for number, (_, pose) in scored.items()})
+    for number, (position, _) in progress(sorted(scored.items()), desc=f"{DATASET} {folder.name} test frames",
+                                          unit="frame"):
+        name = shots[position].name
+        mask = undistorter.mask(person_mask(folder, name, position))
+        writer.eval_view(HELD_OUT_CAMERA, number, undistorter.image(read_rgb(folder / "images" / name)), mask,
+                         {PID: mask})
