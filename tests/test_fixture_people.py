@@ -143,3 +143,29 @@ def test_back_mark_only_seen_from_behind(model, striped):
         without = render_meshes([person_mesh(unmarked, posed)], K, R, t, W, H).rgb
         changed = int((np.abs(with_mark - without).max(axis=2) > MARK_PIXEL_DIFF).sum())
         assert (changed >= MARK_MIN_PIXELS) if seen else (changed == 0), (yaw, changed)
+
+
+def test_outfits_bare_the_legs_below_the_shorts_and_change_only_the_shirts_back(model):
+    from glimpse.fixtures.people import with_outfit
+
+    look = replace(random_look(5, "neutral"), shirt_pattern="plain", back_mark="")
+    shorts = dress(model, with_outfit(look, ("shorts",)), TEXTURE)
+    long = dress(model, look, TEXTURE)
+    joints = rest_joints(model, shorts)
+    for person, bare in ((shorts, True), (long, False)):
+        shins = np.isin(person.weights.argmax(1), (4, 5)) & (person.region != REGIONS.index("shoes"))
+        share = (person.region[shins] == REGIONS.index("skin")).mean()
+        assert share == 1.0 if bare else share < 0.3  # long trousers: skin only in the strip above the shoes
+    thighs = np.isin(shorts.weights.argmax(1), (1, 2)) & (shorts.rest_vertices[:, 1] > joints[1, 1] - 0.1)
+    assert (shorts.region[thighs] == REGIONS.index("trousers")).mean() > 0.9
+    two_tone = dress(model, with_outfit(look, ("two_tone",)), TEXTURE)
+    posed = pose_person(model, two_tone, np.zeros(3), np.zeros(69), np.zeros(3))[0]
+    for yaw, differs in ((np.pi, True), (0.0, False)):  # the back panel shows from behind only
+        K, R, t = camera(yaw)
+        mask = shirt_mask(two_tone, posed, K, R, t)
+        plain = render_meshes([person_mesh(long, posed)], K, R, t, W, H).rgb
+        toned = render_meshes([person_mesh(two_tone, posed)], K, R, t, W, H).rgb
+        change = float(np.abs(plain - toned).max(axis=2)[mask].mean())
+        assert (change > 0.15) if differs else (change < 0.01), (yaw, change)
+    with pytest.raises(ValueError, match="unknown outfit"):
+        with_outfit(look, ("kilt",))
