@@ -99,8 +99,9 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
     for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"):
         run(stage, scene, out, f"{params} {joint_params}")
     for prior in priors:
+        kind, _, overrides = prior.partition("@")  # "surface@prior_surface.garments=false": a variant
         for stage in ("06_joint_opt", "07_eval"):
-            run(stage, scene, out, f"{params} {joint_params} prior.kind={prior}")
+            run(stage, scene, out, f"{params} {joint_params} prior.kind={kind} {overrides.replace('@', ' ')}")
         yield prior, out / f"{scenario}_{size}"
 
 
@@ -163,7 +164,8 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
             counts = ", ".join(str(p["gaussians"]) for p in report["people"].values())
             total, large, needles = hedgehogs(run_dir)
             people_of_run = trained_people(run_dir)
-            print(f"| {scenario} | {report['prior']} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
+            label = prior if "@" in prior else report["prior"]  # a variant shows its overrides
+            print(f"| {scenario} | {label} | {metrics['views'].split(' (')[0]} | {humans[0]['psnr']:.2f} | "
                   f"{humans[0]['ssim']:.4f} | {humans[0]['lpips']:.2f} | {_cells(seen, 0)} | {_cells(unseen, 0)} | "
                   f"{per_person} | {composite['psnr']:.2f} | {report['psnr_people_db']} | {counts} | "
                   f"{large} / {needles} of {total} | "
@@ -213,7 +215,9 @@ def main() -> int:
                         help="how stage 02 gets the bodies (provided = the ground truth)")
     parser.add_argument("--seed", type=int, default=SEED, help="the fixture scenes' seed")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed runs")
-    parser.add_argument("--priors", default="none,surface", help="stage 06's priors to compare, in order")
+    parser.add_argument("--priors", default="none,surface",
+                        help="stage 06's priors to compare, in order; KIND@KEY=VALUE[@KEY=VALUE] runs a prior with "
+                             "parameter overrides (surface@prior_surface.garments=false)")
     parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,

@@ -25,6 +25,10 @@ class SurfacePriorConfig:
     mirror_weight: float
     part_anchor: float
     part_min_seen: float
+    garments: bool
+    skin_colour_distance: float
+    skin_reach_m: float
+    neutral_garment: list[float]
     colour_confidence: float
     colour_max_angle_deg: float
     colour: float
@@ -47,6 +51,10 @@ class SurfacePriorConfig:
                 or self.colour_confidence <= 0):
             raise ConfigError("pipeline.yaml prior_surface: need needle_ratio >= 1, surface_margin_m > 0, "
                               "silhouette_margin_m >= 0 and colour_confidence > 0")
+        if (len(self.neutral_garment) != 3 or not all(0.0 <= c <= 1.0 for c in self.neutral_garment)
+                or self.skin_colour_distance <= 0 or self.skin_reach_m < 0):
+            raise ConfigError("pipeline.yaml prior_surface: need neutral_garment as three values in 0..1, "
+                              "skin_colour_distance > 0 and skin_reach_m >= 0")
         low, high = self.orbit.elevation_deg
         if not -90.0 <= low <= high <= 90.0 or self.orbit.radius_m <= 0 or not 0 < self.orbit.fovy_deg < 180:
             raise ConfigError("pipeline.yaml prior_surface.orbit: need -90 <= elevation_deg[0] <= elevation_deg[1] "

@@ -12,7 +12,8 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
   with a confidence of ``colour_confidence`` x their opacity sum (faint Gaussians' colours yield to
   their neighbours), extended to the rest of the body over the mesh plus left-right mirror edges,
   pulled with ``part_anchor`` towards the seen mean of the vertex's body part, or of its nearest
-  seen ancestor part, both weighted by opacity (glimpse.prior.complete).
+  seen ancestor part, both weighted by opacity (glimpse.prior.complete); with ``garments``, on the
+  torso, arms and legs, towards skin or the zone's garment instead (glimpse.prior.garments).
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
@@ -42,6 +43,7 @@ from glimpse.morphology import disk
 from glimpse.prior.base import PriorContext, UnseenPrior
 from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
+from glimpse.prior.garments import BodyZones, body_zones, garment_anchors
 from glimpse.render import Camera, rasterize
 from glimpse.render.mesh_raster import rasterize_triangles
 from glimpse.render.sh import sh_dc_to_rgb
@@ -68,6 +70,7 @@ class PersonPrior:
     vertices: Tensor
     seen: Tensor
     colour_source: Tensor  # [V] bool: seen head-on enough to lend its colour
+    zones: BodyZones  # where skin or garments continue (glimpse.prior.garments)
     vertex_colours: Tensor
     coloured_at: int
     nearest: Tensor | None
@@ -96,8 +99,9 @@ class SurfacePrior(UnseenPrior):
             record = context.visibility[person.pid]
             seen = torch.as_tensor(record.seen_frames >= config.min_seen_frames, device=vertices.device)
             source = seen & torch.as_tensor(record.best_cosine >= min_cosine, device=vertices.device)
+            points = vertices.double().cpu().numpy()
             self.people[person.pid] = PersonPrior(
-                cKDTree(vertices.double().cpu().numpy()), vertices, seen, source, torch.zeros_like(vertices), 0,
+                cKDTree(points), vertices, seen, source, body_zones(labels, points), torch.zeros_like(vertices), 0,
                 None, self._silhouette_views(vertices, faces, rng))
 
     def _silhouette_views(self, vertices: Tensor, faces: np.ndarray, rng: np.random.Generator) -> list[SilhouetteView]:
@@ -143,9 +147,14 @@ class SurfacePrior(UnseenPrior):
         known = (state.colour_source & (mass > 0)).cpu().numpy()
         mean = (total / mass.clamp(min=1e-12)[:, None]).double().cpu().numpy()
         opacity_mass = mass.double().cpu().numpy()
-        anchors = part_means(mean, known, self.groups, self.parent_group, self.config.part_min_seen, opacity_mass)
-        confidence = np.where(known, self.config.colour_confidence * opacity_mass, 0.0)
-        filled = screened_fill(mean, confidence, self.graph, anchors, self.config.part_anchor, initial=previous)
+        config = self.config
+        anchors = part_means(mean, known, self.groups, self.parent_group, config.part_min_seen, opacity_mass)
+        if config.garments:
+            anchors = garment_anchors(mean, known, opacity_mass, state.zones, self.groups, anchors,
+                                      config.skin_colour_distance, config.skin_reach_m,
+                                      np.asarray(config.neutral_garment))
+        confidence = np.where(known, config.colour_confidence * opacity_mass, 0.0)
+        filled = screened_fill(mean, confidence, self.graph, anchors, config.part_anchor, initial=previous)
         state.vertex_colours = torch.as_tensor(filled, dtype=torch.float32, device=weights.device)
 
     def state_dict(self) -> dict:
