@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-
 from scipy.spatial.transform import Rotation
 
 from glimpse.body.config import peek_body_model_kind

@@ -21,6 +21,7 @@ from glimpse.errors import GlimpseError
 from glimpse.io.cameras_json import read_cameras_json
 from glimpse.io.colmap_model import PINHOLE_MODELS, read_colmap_model
 
+
 def mean_up(cameras: list[PinholeCamera]) -> np.ndarray:
     """(3,) unit world vector: the mean of the cameras' up directions (OpenCV cameras: -y)."""
     up = -np.mean([camera.R[1] for camera in cameras], axis=0)
