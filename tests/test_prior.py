@@ -257,7 +257,7 @@ def _prior_and_person(body_model, config: SurfacePriorConfig = SURFACE, views: i
 
 
 def test_unseen_gaussians_are_pulled_to_the_colour_seen_on_the_body_and_seen_ones_are_left_alone(body_model):
-    prior, person, seen = _prior_and_person(body_model)
+    prior, person, seen = _prior_and_person(body_model, replace(SURFACE, grazing_colour=False))
     red = torch.tensor([0.9, 0.1, 0.1])
     with torch.no_grad():  # the camera saw a red front; the back stays grey
         person.model.sh_dc[torch.as_tensor(seen), 0] = rgb_to_sh_dc(red)
@@ -268,6 +268,19 @@ def test_unseen_gaussians_are_pulled_to_the_colour_seen_on_the_body_and_seen_one
     assert grad[torch.as_tensor(seen)].abs().max() == 0 and (grad[torch.as_tensor(~seen)] > 0).float().mean() > 0.9
     completed = prior.people["p0"].vertex_colours  # the whole back is completed red, not left grey
     assert torch.allclose(completed[torch.as_tensor(~seen)].mean(0), red, atol=0.05)
+
+
+def test_surfaces_seen_only_edge_on_are_pulled_to_the_completed_colour_too(body_model):
+    prior, person, _ = _prior_and_person(body_model, replace(SURFACE, grazing_colour=True))
+    vertex = prior._nearest(person)
+    state = prior.people["p0"]
+    with torch.no_grad():  # the head-on surface was seen red; the edge-on one kept a grey from the silhouette
+        person.model.sh_dc[state.colour_source[vertex], 0] = rgb_to_sh_dc(torch.tensor([0.9, 0.1, 0.1]))
+    prior.losses(1, [person])["loss_prior_colour"].backward()
+    grad = person.model.sh_dc.grad[:, 0].norm(dim=1)
+    edge_on = state.seen[vertex] & ~state.colour_source[vertex]
+    assert edge_on.sum() > 50 and (grad[edge_on] > 0).float().mean() > 0.9
+    assert grad[state.colour_source[vertex]].abs().max() == 0  # what lends the colour is left alone
 
 
 def test_the_prior_pulls_stray_unseen_gaussians_back_and_flattens_needles(body_model):

@@ -31,6 +31,7 @@ class SurfacePriorConfig:
     neutral_garment: list[float]
     colour_confidence: float
     colour_max_angle_deg: float
+    grazing_colour: bool
     colour: float
     view_dependent: float
     surface: float

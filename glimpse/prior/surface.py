@@ -13,7 +13,9 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
   their neighbours), extended to the rest of the body over the mesh plus left-right mirror edges,
   pulled with ``part_anchor`` towards the seen mean of the vertex's body part, or of its nearest
   seen ancestor part, both weighted by opacity (glimpse.prior.complete); with ``garments``, on the
-  torso, arms and legs, towards skin or the zone's garment instead (glimpse.prior.garments).
+  torso, arms and legs, towards skin or the zone's garment instead (glimpse.prior.garments). With
+  ``grazing_colour``, the Gaussians of vertices seen only beyond ``colour_max_angle_deg`` are pulled
+  to the completed colour too.
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
@@ -193,20 +195,24 @@ class SurfacePrior(UnseenPrior):
         return out
 
     def _unseen_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor]:
-        """(colour term, surface term) of the person's unseen Gaussians (zero when every one was seen)."""
+        """(colour term, surface term) of the person's unseen Gaussians (zero when every one was seen); with
+        ``grazing_colour``, the colour term also covers the Gaussians of vertices seen only at grazing angles
+        (they lend no colour either: their own came from the edge of a silhouette)."""
         state, model = self.people[person.pid], person.model
         nearest = self._nearest(person)
         unseen = ~state.seen[nearest]
-        if not unseen.any():
-            zero = model.means.sum() * 0.0
-            return zero, zero
-        rgb = sh_dc_to_rgb(model.sh_dc[unseen, 0])
-        colour = (rgb - state.vertex_colours[nearest[unseen]]).square().sum(1).mean()
-        if model.sh_rest.shape[1] > 0 and self.config.view_dependent > 0:
-            colour = colour + self.config.view_dependent * model.sh_rest[unseen].square().sum((1, 2)).mean()
-        distance = (model.means[unseen] - state.vertices[nearest[unseen]]).norm(dim=1)
-        margin = self.config.surface_margin_m
-        surface = ((distance - margin).clamp(min=0.0) / margin).square().mean()
+        pulled = ~state.colour_source[nearest] if self.config.grazing_colour else unseen
+        zero = model.means.sum() * 0.0
+        colour = surface = zero
+        if pulled.any():
+            rgb = sh_dc_to_rgb(model.sh_dc[pulled, 0])
+            colour = (rgb - state.vertex_colours[nearest[pulled]]).square().sum(1).mean()
+            if model.sh_rest.shape[1] > 0 and self.config.view_dependent > 0:
+                colour = colour + self.config.view_dependent * model.sh_rest[pulled].square().sum((1, 2)).mean()
+        if unseen.any():
+            distance = (model.means[unseen] - state.vertices[nearest[unseen]]).norm(dim=1)
+            margin = self.config.surface_margin_m
+            surface = ((distance - margin).clamp(min=0.0) / margin).square().mean()
         return colour, surface
 
     def _needle_term(self, person: PersonGaussians) -> Tensor:
