@@ -212,7 +212,6 @@ def test_joblib_files_are_read_without_running_code(tmp_path):
     joblib.dump({"pose": np.zeros(3), "evil": RunsCode()}, tmp_path / "evil.pkl")
     with pytest.raises(GlimpseError, match="refusing to unpickle builtins.print"):
         load_joblib_pickle(tmp_path / "evil.pkl")
-    raw = (tmp_path / "ok.pkl").read_bytes()
     joblib.dump(data, tmp_path / "ok.pkl")
     raw = (tmp_path / "ok.pkl").read_bytes()
     (tmp_path / "cut.pkl").write_bytes(raw[: len(raw) - 40])

@@ -94,11 +94,11 @@ def smpl_model_file(options: ImportOptions, dataset: str, gender: str = "neutral
 
 
 def rest_pelvis(model_file: Path, betas: np.ndarray) -> np.ndarray:
-    """(3,) the pelvis of the body shaped by ``betas`` in its rest pose (about which smplx turns
-    global_orient)."""
+    """The pelvis of the body shaped by ``betas`` in its rest pose (about which smplx turns global_orient):
+    (3,) for betas [B], [T, 3] for betas [T, B] (the model file read once)."""
     data = load_body_model_file(model_file)
-    shaped = data.v_template + data.shapedirs[:, :, : len(betas)] @ betas
-    return data.J_regressor[0] @ shaped
+    shaped = data.v_template + np.einsum("vcb,...b->...vc", data.shapedirs[:, :, : betas.shape[-1]], betas)
+    return np.einsum("v,...vc->...c", data.J_regressor[0], shaped)
 
 
 def pelvis_placed_smpl(global_orient: np.ndarray, turn: Rotation, shift: np.ndarray, scale: np.ndarray,

@@ -173,10 +173,10 @@ def person_mask(folder: Path, name: str, position: int) -> np.ndarray:
         if path.is_file():
             values = load_object_npy(path) if path.suffix == ".npy" else np.asarray(Image.open(path))
             return (values if values.ndim == 2 else values[..., 0]) == 0
-    sam = sorted((folder / HUGS_MASKS).glob("*.png"))
     same_name = folder / HUGS_MASKS / name
-    if same_name.is_file() or position < len(sam):
-        return np.asarray(Image.open(same_name if same_name.is_file() else sam[position]).convert("L")) > 127
+    sam = [same_name] if same_name.is_file() else sorted((folder / HUGS_MASKS).glob("*.png"))[position:]
+    if sam:
+        return np.asarray(Image.open(sam[0]).convert("L")) > 127
     raise GlimpseError(f"{folder}: no mask for {name} in segmentations/ or {HUGS_MASKS}/")
 
 
@@ -247,10 +247,10 @@ def write_bodies(writer: SceneWriter, model_file: Path, bodies: PlacedBodies, ro
     """smpl.npz of the bodies' ``rows`` (frame ``numbers``) in the scene's world (COLMAP's / world_scale): the
     mean betas, each pelvis where the source puts it; returns the betas."""
     betas = bodies.betas[rows].mean(axis=0)
-    source_pelvis = np.stack([rest_pelvis(model_file, b) for b in bodies.betas[rows]])
+    pelvises = rest_pelvis(model_file, np.concatenate([bodies.betas[rows], betas[None]]))  # each frame's, the mean's
     global_orient, transl = pelvis_placed_smpl(
         bodies.global_orient[rows], bodies.turn[rows], bodies.shift[rows] / world_scale,
-        bodies.scale[rows] / world_scale, source_pelvis, rest_pelvis(model_file, betas))
+        bodies.scale[rows] / world_scale, pelvises[:-1], pelvises[-1])
     writer.smpl(PID, np.asarray(numbers), betas, global_orient, bodies.body_pose[rows], transl)
     return betas
 
