@@ -40,7 +40,7 @@ from glimpse.io.video import write_mp4
 from glimpse.scene import load_scene
 
 SIZE = "hd"
-SCENARIOS = ("demo", "crowd", "moving_camera", "lower_body_occluded")
+SCENARIOS = ("demo", "crowd", "moving_camera", "lower_body_occluded", "adult_child", "crouch", "unseen_clothes")
 PCK_FRACTION = 0.1
 JOINT_MASK_REACH_PX = 2  # a joint counts as visible when the person's visible mask is within this many pixels
 OWN_BODY_MARGIN_M = 0.05  # a joint is behind its own body when deeper than this past its own skin (clothing, curvature)

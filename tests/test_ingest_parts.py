@@ -394,3 +394,79 @@ def test_a_checkpoint_round_trips_and_a_foreign_or_broken_one_is_not_used(tmp_pa
     assert load_checkpoint(path, "another video") is None
     path.write_bytes(b"not a checkpoint")
     assert load_checkpoint(path, "key") is None
+
+
+def test_foreground_blobs_of_people_side_by_side_are_also_looked_at_one_window_at_a_time() -> None:
+    from dataclasses import replace
+
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.foreground import foreground_candidates
+
+    config = replace(load_ingest_config(), foreground_person_aspect=0.35, foreground_region_grow=1.5)
+    plate = np.full((240, 320, 3), 100, np.uint8)
+    image = plate.copy()
+    image[40:200, 60:110] = (200, 40, 40)  # two people, 160 px tall, touching: one blob 100 px wide
+    image[40:200, 110:160] = (40, 200, 40)
+    image[20:23, 290:293] = 255  # a speck: opened away
+    image[60:200, 230:280] = (40, 40, 200)  # a third person, already found
+    explained = np.zeros((240, 320), bool)
+    explained[60:200, 230:280] = True
+    candidates = foreground_candidates(image, plate, explained, config, person_side=0.0)
+    # one blob, 100 / (0.35 * 160) -> 2 people: the whole blob, then each half with the other half painted
+    assert len(candidates) == 3
+    whole, left, right = candidates
+    np.testing.assert_allclose(whole.region.centre, [109.5, 119.5])
+    assert whole.region.side == pytest.approx(160 * 1.5)
+    np.testing.assert_allclose([left.region.centre[0], right.region.centre[0]], [84.5, 134.5])
+    assert left.paint[100, 130] and not left.paint[100, 80] and right.paint[100, 80] and not right.paint[100, 130]
+    assert all(c.paint[100, 250] for c in candidates)  # the person found is painted over for every look
+    assert not whole.paint[100, 80] and not whole.paint[100, 130]
+    single = foreground_candidates(image[:, :110], plate[:, :110], explained[:, :110], config, person_side=300.0)
+    assert len(single) == 1 and single[0].region.side == 300.0  # one person wide: one look, at least person_side
+
+
+def test_a_new_person_lying_mostly_on_someone_found_is_not_taken() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.tracker import Observation, Tracker
+
+    def observation(x: float, body: np.ndarray) -> Observation:
+        region = Region(np.array([x, 50.0]), 80.0, 0.0)
+        return Observation(_landmarks_at(np.tile([x, 50.0], (BODY_LANDMARKS, 1)), region), np.zeros((100, 100)),
+                           body, np.array([x - 5, 10, x + 5, 90]), np.zeros((2, 4)), 1.0, np.ones((17, 3)), body=body)
+
+    tracker = Tracker.__new__(Tracker)
+    tracker.config = load_ingest_config()
+    found_body = np.zeros((100, 100), bool)
+    found_body[10:90, 40:60] = True
+    found = observation(50.0, found_body)
+    on_them = np.zeros((100, 100), bool)
+    on_them[10:90, 45:62] = True  # 15 of its 17 columns on the found person's body
+    beside = np.zeros((100, 100), bool)
+    beside[10:90, 55:75] = True  # 5 of 20 columns
+    for body, x, taken in ((on_them, 53.0, False), (beside, 65.0, True)):
+        fresh: list[Observation] = []
+        tracker._keep_new(observation(x, body), [found], fresh)
+        assert (len(fresh) == 1) == taken
+
+
+def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bones_say_nearer() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.tracker import Observation, Track, depth_ordered_labels
+
+    shape = (120, 100)
+
+    def person(index: int, feet_row: float, depth: float) -> tuple[Track, Observation]:
+        points = np.column_stack([np.full(BODY_LANDMARKS, 50.0), np.linspace(20.0, feet_row, BODY_LANDMARKS)])
+        landmarks = _landmarks_at(points, Region(np.array([50.0, 60.0]), 100.0, 0.0))
+        claim = np.zeros(shape, np.float32)
+        claim[20:100, 40:60] = 1.0  # both segmentations claim the same pixels, both skeletons run through them
+        observation = Observation(landmarks, claim, claim > 0.5, np.array([45.0, 20.0, 55.0, feet_row]),
+                                  np.zeros((2, 4)), depth, np.ones((17, 3)))
+        return Track(index, landmarks, np.zeros((2, 4))), observation
+
+    adult_behind = person(0, feet_row=90.0, depth=0.004)  # feet higher up the image; adult bones: ranked near
+    child_in_front = person(1, feet_row=110.0, depth=0.006)  # an adult's bone lengths given to a child: "far"
+    pair = [adult_behind, child_in_front]
+    assert depth_ordered_labels(pair, shape, 0.5, 0.25, cue="feet")[60, 50] == 2  # the child keeps its pixels
+    assert depth_ordered_labels(pair, shape, 0.5, 0.25, cue="bones")[60, 50] == 1

@@ -33,6 +33,7 @@ class IngestConfig:
     track_shared_points: int
     track_shared_point_distance: float
     track_covered_iou: float
+    track_new_max_overlap: float
     track_part_scale: float
     track_max_missing_frames: int
     track_reid_max_distance: float
@@ -43,12 +44,16 @@ class IngestConfig:
     foreground_threshold: int
     foreground_min_area: float
     foreground_region_grow: float
+    foreground_close: float
+    foreground_person_aspect: float
+    foreground_rounds: int
     plate_frames: int
     motion_threshold: float
     motion_sample_frames: int
     motion_min_tracked_fraction: float
     mask_threshold: float
     mask_body_radius: float
+    mask_depth_cue: Literal["feet", "bones"]
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
     appearance_bins: int

@@ -215,7 +215,8 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
             continue
         tracked = resized(rgb, track_size)
         observed = tracker.step(frame_id, tracked)
-        labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius)
+        labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius,
+                                      config.mask_depth_cue)
         cv2.imwrite(str(_label_path(work, frame_id)), labels)
         if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
             save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)

@@ -11,18 +11,22 @@ Per frame (BlazePose's own scheme, extended to several people):
    behind*: its region again with the people already found painted over by the background plate (grey for a
    moving camera), which leaves whoever they hide. A track that found nobody while its region overlaps
    someone found looks behind too. Only the found people's pixels nearer to their own skeleton than to where
-   the hidden person's skeleton is expected (the last one moved by the velocity) are painted, and a track
-   that was already missing takes what it finds only if it looks as it did.
+   the hidden person's skeleton is expected (the last one moved by the velocity) are painted, and what the
+   track finds must look like it (as when following; closer still for a track that was already missing).
 3. **Find.** Candidate regions come from the pose detector (BlazePose's on the whole frame and on overlapping
    tiles for small people, or the user's ONNX detector), and, for a fixed camera, from pixels that differ
    from the background plate and no found person's body explains (people seen from behind, whom the
-   face-keyed detector misses). A candidate no found person covers is looked at by the landmark model.
+   face-keyed detector misses; :mod:`glimpse.ingest.foreground`: blobs of people side by side are also cut
+   into person-wide windows, looked at with the rest painted over by the plate, and what remains is looked
+   at again after a round that found someone). A candidate no found person covers is looked at by the
+   landmark model; what it finds is kept unless it is someone found already or lies mostly on their bodies.
 4. **Re-identify.** New observations are matched to hidden and lost tracks by appearance (Hungarian method);
    what stays unmatched starts a new track.
 
-Masks are depth-ordered (:func:`depth_ordered_labels`): people are ranked by a depth proxy (metric bone
-lengths from the landmark model's 3D output over their lengths in pixels); a pixel several segmentations
-claim goes to the nearest person whose skeleton passes close to it, else to the closest skeleton.
+Masks are depth-ordered (:func:`depth_ordered_labels`): people are ranked by where their feet are in the image
+(lower = nearer, for people on one floor), or by a depth proxy (metric bone lengths from the landmark model's 3D
+output over their lengths in pixels); a pixel several segmentations claim goes to the nearest person whose
+skeleton passes close to it, else to the closest skeleton.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from glimpse.ingest.blazepose import (
 )
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
+from glimpse.ingest.foreground import foreground_candidates
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
 # Bones (BlazePose landmark pairs) whose metric and pixel lengths give the depth proxy: shoulders-hips,
@@ -60,6 +65,7 @@ SAME_PERSON_MIN_POINTS = 4  # ... when there are at least this many (else all 17
 PART_INSIDE = 0.9  # share of a small observation's landmark box inside a larger one's that makes it a piece of it
 VELOCITY_SMOOTHING = 0.5  # weight of the newest displacement in a track's velocity
 UNMATCHED = 1e6  # assignment cost of a pair that must not match
+SAME_REGION_IOU = 0.9  # a foreground region this close (IoU) to one looked at in an earlier round is not looked again
 PAINT_GREY = 128  # what covers found people when a track looks behind them without a background plate
 
 
@@ -166,24 +172,6 @@ def skeleton_distance(landmarks: PoseLandmarks, shape: tuple[int, int]) -> np.nd
     return distance / torso_length(landmarks)
 
 
-def foreground_regions(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig,
-                       person_side: float) -> list[Region]:
-    """Upright regions around connected pixels that differ from the plate and no observed person explains, at
-    least ``person_side`` pixels wide (a blob is often a part of a person: the rest is hidden or explained)."""
-    difference = np.abs(image.astype(np.int16) - plate.astype(np.int16)).max(axis=2) > config.foreground_threshold
-    difference &= ~explained
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
-    difference = cv2.morphologyEx(difference.astype(np.uint8), cv2.MORPH_OPEN, kernel)
-    _, _, stats, _ = cv2.connectedComponentsWithStats(difference)
-    min_area = config.foreground_min_area * image.shape[0] * image.shape[1]
-    regions = []
-    for x, y, w, h, area in stats[1:]:
-        if area >= min_area:
-            side = max(max(w, h) * config.foreground_region_grow, person_side)
-            regions.append(Region(np.array([x + (w - 1) / 2, y + (h - 1) / 2]), side, 0.0))
-    return regions
-
-
 def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig,
                      detector: OnnxDetector | None = None) -> list[Region]:
     """Landmark regions of the detected people: the user's ONNX detector's boxes, or BlazePose's detector on the
@@ -215,8 +203,11 @@ class Tracker:
         self.tracks: list[Track] = []
 
     # ------------------------------------------------------------------ one person in one region
-    def observe(self, image: np.ndarray, region: Region) -> Observation | None:
-        """Landmarks in ``region`` (re-centred ``landmark_refine_steps`` times), or None when nobody is there."""
+    def observe(self, image: np.ndarray, region: Region, look_image: np.ndarray | None = None
+                ) -> Observation | None:
+        """Landmarks in ``region`` (re-centred ``landmark_refine_steps`` times), or None when nobody is there.
+        look_image: the image the appearance is taken from (default ``image``; the unpainted frame when
+        ``image`` has people painted over)."""
         config = self.config
         for _ in range(config.landmark_refine_steps):
             found = self.model.landmarks(image, region, refine=False)
@@ -234,7 +225,8 @@ class Tracker:
         box = np.concatenate([inside.min(0), inside.max(0)])
         split = float(found.points[list(MID_HIPS), 1].mean())
         points, confidence = found.coco17()
-        return Observation(found, probability, mask, box, appearance(image, mask, split, config.appearance_bins),
+        look = appearance(image if look_image is None else look_image, mask, split, config.appearance_bins)
+        return Observation(found, probability, mask, box, look,
                            depth_proxy(found), np.concatenate([points, confidence[:, None]], 1))
 
     # ------------------------------------------------------------------ one frame
@@ -329,35 +321,62 @@ class Tracker:
         hidden &= np.min([self._skeleton_distance(o) for o in followed.values()], axis=0) <= own
         painted = image.copy()
         painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
-        observation = self.observe(painted, track.predicted_region())
+        observation = self.observe(painted, track.predicted_region(), look_image=image)
         if observation is None or any(one_person(observation, other, self.config) for other in followed.values()):
             return
-        if track.missing and appearance_distance(track.look, observation.look) > self.config.track_reid_max_distance:
-            return  # someone else was behind them: a lost track comes back only as it looked
+        # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
+        limit = self.config.track_reid_max_distance if track.missing else self.config.track_follow_max_distance
+        if comparable(track.look, observation.look) and appearance_distance(track.look, observation.look) > limit:
+            return
         followed[track.index] = observation
 
     def _find_new(self, image: np.ndarray, observed: list[Observation]) -> list[Observation]:
-        candidates = [(region, True) for region in detector_regions(self.model, image, self.config, self.detector)]
-        if self.plate is not None:  # unexplained foreground: never covered by a found person, by construction
-            explained = np.zeros(image.shape[:2], bool)
-            for observation in observed:
-                explained |= self._body_pixels(observation)
-            sides = [t.region.side for t in self.tracks if t.missing == 0]
-            person_side = float(np.median(sides)) if sides else 0.0
-            candidates += [(region, False) for region in
-                           foreground_regions(image, self.plate, explained, self.config, person_side)]
         fresh: list[Observation] = []
-        for region, may_be_covered in candidates:
+        for region in detector_regions(self.model, image, self.config, self.detector):
             boxes = np.array([o.landmarks.region.box() for o in observed + fresh]).reshape(-1, 4)
-            if may_be_covered and len(boxes) and box_iou(region.box()[None], boxes).max() > self.config.track_covered_iou:
+            if len(boxes) and box_iou(region.box()[None], boxes).max() > self.config.track_covered_iou:
                 continue
-            observation = self.observe(image, region)
-            if observation is None:
-                continue
-            if any(one_person(observation, other, self.config) for other in observed + fresh):
-                continue
-            fresh.append(observation)
+            self._keep_new(self.observe(image, region), observed, fresh)
+        if self.plate is None:
+            return fresh
+        # unexplained foreground (never covered by a found person, by construction), again after each round that
+        # found someone: what is left of a blob once they are explained may be another person
+        sides = [t.region.side for t in self.tracks if t.missing == 0]
+        person_side = float(np.median(sides)) if sides else 0.0
+        tried = np.zeros((0, 4))
+        for _ in range(self.config.foreground_rounds):
+            explained = np.zeros(image.shape[:2], bool)
+            for observation in observed + fresh:
+                explained |= self._body_pixels(observation)
+            found_before = len(fresh)
+            for candidate in foreground_candidates(image, self.plate, explained, self.config, person_side):
+                box = candidate.region.box()
+                if len(tried) and box_iou(box[None], tried).max() > SAME_REGION_IOU:
+                    continue
+                tried = np.concatenate([tried, box[None]])
+                painted = image
+                if candidate.paint.any():
+                    painted = image.copy()
+                    painted[candidate.paint] = self.plate[candidate.paint]
+                self._keep_new(self.observe(painted, candidate.region, look_image=image), observed, fresh)
+            if len(fresh) == found_before:
+                break
         return fresh
+
+    def _keep_new(self, observation: Observation | None, observed: list[Observation], fresh: list[Observation]
+                  ) -> None:
+        """Add a candidate's observation to ``fresh`` unless it is nobody, someone already found, or lies mostly on
+        the bodies of people already found (more than ``track_new_max_overlap`` of its own body's pixels): a fit
+        that took another person's limbs for those of someone they hide, whose mask would take that person's
+        pixels."""
+        if observation is None or any(one_person(observation, other, self.config) for other in observed + fresh):
+            return
+        body = self._body_pixels(observation)
+        if observed or fresh:
+            others = np.any([self._body_pixels(other) for other in observed + fresh], axis=0)
+            if np.count_nonzero(body & others) > self.config.track_new_max_overlap * max(np.count_nonzero(body), 1):
+                return
+        fresh.append(observation)
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
         """Match new observations to tracks not seen this frame (Hungarian, on appearance); start the rest."""
@@ -407,17 +426,26 @@ class Tracker:
         track.boxes.append(observation.box)
 
 
+def nearness_rank(observation: Observation, cue: str) -> float:
+    """Sort key, smaller = nearer the camera. ``feet``: the lowest landmark's image row, higher up = farther
+    (people on one floor seen from above it; right for a child and an adult alike). ``bones``: the depth proxy,
+    metres per pixel along the bones (the landmark model's metric lengths are an adult's whatever the person's
+    size, so a child is ranked too far)."""
+    return -float(observation.box[3]) if cue == "feet" else observation.depth
+
+
 def depth_ordered_labels(observations: list[tuple[Track, Observation]], shape: tuple[int, int],
-                         threshold: float, body_radius: float) -> np.ndarray:
+                         threshold: float, body_radius: float, cue: str = "feet") -> np.ndarray:
     """[H, W] uint16: 0 for nobody, else 1 + the index of the track that owns the pixel.
 
     A pixel claimed by one person's segmentation is theirs. Where several claim it (the landmark model segments
-    every person in its crop), the nearest person (depth proxy) whose skeleton lies within ``body_radius`` torso
-    lengths takes it (their body hides whoever is behind); otherwise the person whose skeleton is nearest."""
+    every person in its crop), the nearest person (:func:`nearness_rank` by ``cue``) whose skeleton lies within
+    ``body_radius`` torso lengths takes it (their body hides whoever is behind); otherwise the person whose
+    skeleton is nearest."""
     labels = np.zeros(shape, np.uint16)
     if not observations:
         return labels
-    ordered = sorted(observations, key=lambda pair: pair[1].depth)
+    ordered = sorted(observations, key=lambda pair: nearness_rank(pair[1], cue))
     claims = np.stack([o.probability > threshold for _, o in ordered])
     count = claims.sum(0)
     ids = np.array([t.index + 1 for t, _ in ordered], np.uint16)

@@ -1,0 +1,64 @@
+"""Where a fixed camera's frame differs from its background plate and no found person explains it: regions to
+look for the people the face-keyed detector misses (seen from behind, entering, half hidden).
+
+Pixels farther than ``foreground_threshold`` from the plate, minus those the people already found explain, are
+opened (specks go) and closed (a person's pieces, split where their clothes match the background, join), and
+each connected blob is one candidate. A blob wider than ``foreground_person_aspect`` times its height holds
+several people side by side (people who walk together merge into one blob): it is looked at whole and cut into
+that many person-wide windows. The landmark model, given a crop with two people in it, often finds neither, so
+each window is looked at with the rest of the blob painted over by the plate, and every candidate with the
+people already found painted over too: the model sees one person.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.crop import Region
+
+OPEN_KERNEL_PX = 5  # opening that removes specks of noise (pixels, at the tracking size)
+
+
+@dataclass(frozen=True)
+class ForegroundCandidate:
+    region: Region  # upright square to give the landmark model
+    paint: np.ndarray  # [H, W] bool: pixels to replace by the plate before looking (people found, the rest of the blob)
+
+
+def unexplained_foreground(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig
+                           ) -> np.ndarray:
+    """[H, W] uint8 (0/1): pixels that differ from the plate and that no found person explains, cleaned."""
+    difference = np.abs(image.astype(np.int16) - plate.astype(np.int16)).max(axis=2) > config.foreground_threshold
+    difference &= ~explained
+    opened = cv2.morphologyEx(difference.astype(np.uint8), cv2.MORPH_OPEN,
+                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (OPEN_KERNEL_PX,) * 2))
+    close_px = max(1, round(config.foreground_close * image.shape[0])) | 1
+    return cv2.morphologyEx(opened, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (close_px,) * 2))
+
+
+def foreground_candidates(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig,
+                          person_side: float) -> list[ForegroundCandidate]:
+    """Candidate regions (see the module docstring), at least ``person_side`` pixels wide (a blob is often a part
+    of a person: the rest is hidden or explained)."""
+    foreground = unexplained_foreground(image, plate, explained, config)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(foreground)
+    min_area = config.foreground_min_area * image.shape[0] * image.shape[1]
+    columns = np.arange(image.shape[1])[None]
+    candidates = []
+    for label, (x, y, w, h, area) in enumerate(stats):
+        if label == 0 or area < min_area:
+            continue
+        blob = labels == label
+        count = max(1, round(w / (config.foreground_person_aspect * h)))
+        windows = [(x, x + w)]
+        if count > 1:
+            windows += [(x + k * w / count, x + (k + 1) * w / count) for k in range(count)]
+        for x0, x1 in windows:
+            side = max(max(x1 - x0, h) * config.foreground_region_grow, person_side)
+            region = Region(np.array([(x0 + x1 - 1) / 2, y + (h - 1) / 2]), side, 0.0)
+            candidates.append(ForegroundCandidate(region, explained | (blob & ((columns < x0) | (columns >= x1)))))
+    return candidates
