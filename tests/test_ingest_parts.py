@@ -425,7 +425,7 @@ def test_foreground_blobs_of_people_side_by_side_are_also_looked_at_one_window_a
     assert len(single) == 1 and single[0].region.side == 300.0  # one person wide: one look, at least person_side
 
 
-def test_a_new_person_lying_mostly_on_someone_found_is_not_taken() -> None:
+def test_a_new_person_or_one_found_behind_someone_lying_mostly_on_them_is_not_taken() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.tracker import Observation, Tracker
@@ -448,6 +448,10 @@ def test_a_new_person_lying_mostly_on_someone_found_is_not_taken() -> None:
         fresh: list[Observation] = []
         tracker._keep_new(observation(x, body), [found], fresh)
         assert (len(fresh) == 1) == taken
+    partly = np.zeros((100, 100), bool)
+    partly[10:90, 48:68] = True  # 12 of 20 columns on them: too much for a new person, not for a look behind
+    assert tracker._taken(observation(58.0, partly), [found], tracker.config.track_new_max_overlap)
+    assert not tracker._taken(observation(58.0, partly), [found], tracker.config.track_behind_max_overlap)
 
 
 def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bones_say_nearer() -> None:

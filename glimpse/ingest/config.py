@@ -34,6 +34,7 @@ class IngestConfig:
     track_shared_point_distance: float
     track_covered_iou: float
     track_new_max_overlap: float
+    track_behind_max_overlap: float
     track_part_scale: float
     track_max_missing_frames: int
     track_reid_max_distance: float

@@ -12,7 +12,8 @@ Per frame (BlazePose's own scheme, extended to several people):
    moving camera), which leaves whoever they hide. A track that found nobody while its region overlaps
    someone found looks behind too. Only the found people's pixels nearer to their own skeleton than to where
    the hidden person's skeleton is expected (the last one moved by the velocity) are painted, and what the
-   track finds must look like it (as when following; closer still for a track that was already missing).
+   track finds must look like it (as when following; closer still for a track that was already missing) and
+   must not lie mostly on the bodies of the people found.
 3. **Find.** Candidate regions come from the pose detector (BlazePose's on the whole frame and on overlapping
    tiles for small people, or the user's ONNX detector), and, for a fixed camera, from pixels that differ
    from the background plate and no found person's body explains (people seen from behind, whom the
@@ -322,7 +323,8 @@ class Tracker:
         painted = image.copy()
         painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
         observation = self.observe(painted, track.predicted_region(), look_image=image)
-        if observation is None or any(one_person(observation, other, self.config) for other in followed.values()):
+        found = list(followed.values())
+        if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap):
             return
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
         limit = self.config.track_reid_max_distance if track.missing else self.config.track_follow_max_distance
@@ -365,18 +367,22 @@ class Tracker:
 
     def _keep_new(self, observation: Observation | None, observed: list[Observation], fresh: list[Observation]
                   ) -> None:
-        """Add a candidate's observation to ``fresh`` unless it is nobody, someone already found, or lies mostly on
-        the bodies of people already found (more than ``track_new_max_overlap`` of its own body's pixels): a fit
-        that took another person's limbs for those of someone they hide, whose mask would take that person's
-        pixels."""
-        if observation is None or any(one_person(observation, other, self.config) for other in observed + fresh):
-            return
+        """Add a candidate's observation to ``fresh`` unless it is nobody or :meth:`_taken`."""
+        if observation is not None and not self._taken(observation, observed + fresh,
+                                                       self.config.track_new_max_overlap):
+            fresh.append(observation)
+
+    def _taken(self, observation: Observation, found: list[Observation], max_overlap: float) -> bool:
+        """Whether an observation shows someone already ``found``, or lies mostly on their bodies (more than
+        ``max_overlap`` of its own body's pixels): a fit that took the limbs of the person in front for those of
+        someone they hide, whose mask would take the front person's pixels."""
+        if any(one_person(observation, other, self.config) for other in found):
+            return True
+        if not found:
+            return False
         body = self._body_pixels(observation)
-        if observed or fresh:
-            others = np.any([self._body_pixels(other) for other in observed + fresh], axis=0)
-            if np.count_nonzero(body & others) > self.config.track_new_max_overlap * max(np.count_nonzero(body), 1):
-                return
-        fresh.append(observation)
+        others = np.any([self._body_pixels(other) for other in found], axis=0)
+        return np.count_nonzero(body & others) > max_overlap * max(np.count_nonzero(body), 1)
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
         """Match new observations to tracks not seen this frame (Hungarian, on appearance); start the rest."""
