@@ -310,20 +310,29 @@ class Tracker:
             observation.body = observation.mask & (self._skeleton_distance(observation) < self.config.mask_body_radius)
         return observation.body
 
+    def _bodies(self, observations: list[Observation], shape: tuple[int, int]) -> np.ndarray:
+        """[H, W] bool: the union of the observations' body pixels (:meth:`_body_pixels`)."""
+        union = np.zeros(shape, bool)
+        for observation in observations:
+            union |= self._body_pixels(observation)
+        return union
+
+    def _painted_over(self, image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+        """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate (grey without one)."""
+        painted = image.copy()
+        painted[pixels] = self.plate[pixels] if self.plate is not None else PAINT_GREY
+        return painted
+
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
         """A track whose region slid onto, or overlaps, someone already found looks again with the found people
         painted over (by the background plate, else grey) where they are nearer to their own skeleton than to the
         track's expected one: the person hidden behind them, if still visible, is who remains."""
-        hidden = np.zeros(image.shape[:2], bool)
-        for observation in followed.values():
-            hidden |= self._body_pixels(observation)
+        found = list(followed.values())
+        hidden = self._bodies(found, image.shape[:2])
         # pixels nearer to where this person should be than to anyone found stay
         own = skeleton_distance(track.predicted_landmarks(), hidden.shape)
-        hidden &= np.min([self._skeleton_distance(o) for o in followed.values()], axis=0) <= own
-        painted = image.copy()
-        painted[hidden] = self.plate[hidden] if self.plate is not None else PAINT_GREY
-        observation = self.observe(painted, track.predicted_region(), look_image=image)
-        found = list(followed.values())
+        hidden &= np.min([self._skeleton_distance(o) for o in found], axis=0) <= own
+        observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), look_image=image)
         if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap):
             return
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
@@ -347,19 +356,14 @@ class Tracker:
         person_side = float(np.median(sides)) if sides else 0.0
         tried = np.zeros((0, 4))
         for _ in range(self.config.foreground_rounds):
-            explained = np.zeros(image.shape[:2], bool)
-            for observation in observed + fresh:
-                explained |= self._body_pixels(observation)
+            explained = self._bodies(observed + fresh, image.shape[:2])
             found_before = len(fresh)
             for candidate in foreground_candidates(image, self.plate, explained, self.config, person_side):
                 box = candidate.region.box()
                 if len(tried) and box_iou(box[None], tried).max() > SAME_REGION_IOU:
                     continue
                 tried = np.concatenate([tried, box[None]])
-                painted = image
-                if candidate.paint.any():
-                    painted = image.copy()
-                    painted[candidate.paint] = self.plate[candidate.paint]
+                painted = self._painted_over(image, candidate.paint)
                 self._keep_new(self.observe(painted, candidate.region, look_image=image), observed, fresh)
             if len(fresh) == found_before:
                 break
@@ -381,7 +385,7 @@ class Tracker:
         if not found:
             return False
         body = self._body_pixels(observation)
-        others = np.any([self._body_pixels(other) for other in found], axis=0)
+        others = self._bodies(found, body.shape)
         return np.count_nonzero(body & others) > max_overlap * max(np.count_nonzero(body), 1)
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
