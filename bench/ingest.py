@@ -11,7 +11,7 @@ mark them on the skin (`coco17_skin`, anny's COCO regressor; what keypoint detec
 body model's joint centres (`coco17`, what the fixtures' own keypoints and stage 02 use). Speed: scene frames per second of the
 tracking pass on this machine, and milliseconds per frame per person.
 
-    python bench/ingest.py [--scenarios demo,crowd] [--seed 0] [--work DIR]
+    python bench/ingest.py [--scenarios demo,crowd] [--seed 0] [--work DIR] [--params "ingest.key=value ..."]
 """
 
 from __future__ import annotations
@@ -129,10 +129,10 @@ def fixture_video(scenario: str, size: str, seed: int, work: Path) -> tuple[Path
     return fixture, video
 
 
-def run(scenario: str, size: str, seed: int, work: Path) -> list[dict]:
+def run(scenario: str, size: str, seed: int, work: Path, params: str = "") -> list[dict]:
     fixture, video = fixture_video(scenario, size, seed, work)
     ingested = work / f"{fixture.name}.ingested"
-    report = ingest(video, ingested, load_ingest_config())
+    report = ingest(video, ingested, load_ingest_config(params))
     found = found_people(ingested)
     truth = true_people(fixture, ("coco17_skin", "coco17"))
     scores = score_people(truth["coco17_skin"], found, PCK_FRACTION)
@@ -155,10 +155,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--size", default=SIZE, help="fixture size (default hd: 960x720)")
     parser.add_argument("--work", type=Path, default=None, help="keeps fixtures and videos between runs")
+    parser.add_argument("--params", default="", help='ingest overrides, as make\'s PARAMS: "ingest.key=value ..."')
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-ingest-"))
     work.mkdir(parents=True, exist_ok=True)
-    rows = [row for name in args.scenarios.split(",") for row in run(name, args.size, args.seed, work)]
+    rows = [row for name in args.scenarios.split(",") for row in run(name, args.size, args.seed, work, args.params)]
     print(f"\nIngest on fixture videos ({args.size}, seed {args.seed}); targets: recall >= 0.95, switches 0, "
           f"PCK@{PCK_FRACTION} >= 0.90, mask IoU >= 0.85\n")
     print("PCK over the joints in view (not behind anyone or anything, the person's own body included); "

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import shlex
 import types
 import typing
@@ -208,6 +209,7 @@ def _check_value(value: Any, tp: Any) -> bool:
 
 
 T = typing.TypeVar("T")
+EXPONENT_FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+")
 
 
 def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) -> T:
@@ -216,7 +218,7 @@ def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) ->
     Unknown keys, missing keys and values of the wrong type are ConfigErrors that
     name ``where`` (e.g. ``pipeline.yaml 01_sfm``) and the known keys. Fields that
     are themselves config dataclasses are built recursively. Float fields accept
-    integers (converted).
+    integers (converted) and numbers in exponent form that YAML left as strings ("5e-5").
     """
     if not isinstance(mapping, Mapping):
         raise ConfigError(f"{where}: must be a mapping, found {type(mapping).__name__}")
@@ -234,6 +236,8 @@ def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) ->
         if dataclasses.is_dataclass(tp):
             values[name] = config_from_mapping(tp, value, f"{where}.{name}")
             continue
+        if tp is float and isinstance(value, str) and EXPONENT_FLOAT.fullmatch(value.strip()):
+            value = float(value)  # "5e-5": YAML 1.1 reads an exponent without a decimal point as a string
         if not _check_value(value, tp):
             raise ConfigError(f"{where}.{name}: expected {_type_name(tp)}, found {value!r}")
         values[name] = float(value) if tp is float else value

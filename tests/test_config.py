@@ -101,6 +101,11 @@ def test_typed_config_is_strict():
     for key, bad in [("mode", "c"), ("rate", "fast"), ("count", 1.5), ("count", True), ("on", 1), ("limit", "no")]:
         with pytest.raises(ConfigError, match=rf"x\.{key}: expected"):
             config_from_mapping(_Example, {**good, key: bad}, "x")
+    (_, value), = parse_cli_params("x.rate=5e-5")  # YAML 1.1 leaves an exponent without a point a string
+    assert value == "5e-5" and config_from_mapping(_Example, {**good, "rate": value}, "x").rate == 5e-5
+    assert config_from_mapping(_Example, {**good, "rate": "-1.5E+3"}, "x").rate == -1500.0
+    with pytest.raises(ConfigError, match=r"x\.count: expected"):
+        config_from_mapping(_Example, {**good, "count": "5e2"}, "x")  # only float fields read numbers from text
     with pytest.raises(ConfigError, match="unknown key.*extra.*known keys: count, limit, mode, on, rate"):
         config_from_mapping(_Example, {**good, "extra": 1}, "x")
     with pytest.raises(ConfigError, match="missing key.*rate"):

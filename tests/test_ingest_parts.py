@@ -456,7 +456,8 @@ def test_a_new_person_or_one_found_behind_someone_lying_mostly_on_them_is_not_ta
 
 def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bones_say_nearer() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
-    from glimpse.ingest.tracker import Observation, Track, depth_ordered_labels
+    from glimpse.ingest.depth_order import depth_ordered_labels
+    from glimpse.ingest.tracker import Observation, Track
 
     shape = (120, 100)
 
@@ -474,3 +475,80 @@ def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bo
     pair = [adult_behind, child_in_front]
     assert depth_ordered_labels(pair, shape, 0.5, 0.25, cue="feet")[60, 50] == 2  # the child keeps its pixels
     assert depth_ordered_labels(pair, shape, 0.5, 0.25, cue="bones")[60, 50] == 1
+
+
+def test_feet_rank_people_by_their_recent_median_so_a_hidden_persons_guessed_feet_do_not_win() -> None:
+    from glimpse.ingest.depth_order import nearness_rank
+    from glimpse.ingest.tracker import Observation, Track
+
+    def track_with_feet(rows: list[float]) -> tuple[Track, Observation]:
+        boxes = [np.array([0.0, 0.0, 10.0, row]) for row in rows]
+        track = Track(0, None, np.zeros((2, 4)), frames=list(range(10, 10 + len(rows))), boxes=boxes)
+        observation = Observation(None, None, None, boxes[-1], np.zeros((2, 4)), 0.0, np.ones((17, 3)))
+        return track, observation
+
+    # hidden behind a child, the adult's feet are guessed onto the child's (row 544) for two frames
+    adult = track_with_feet([480.0, 490.0, 495.0, 500.0, 502.0, 544.0, 540.0])
+    child = track_with_feet([530.0, 534.0, 536.0, 537.0, 538.0, 537.0, 538.0])
+    assert nearness_rank(*adult, "feet", 1) < nearness_rank(*child, "feet", 1)  # this frame alone: adult nearer
+    assert nearness_rank(*child, "feet", 7) < nearness_rank(*adult, "feet", 7)  # recent median: the child
+    assert nearness_rank(*adult, "feet", 7) == -500.0
+    old = track_with_feet([600.0, 600.0, 600.0, 480.0])
+    old[0].frames[:3] = [0, 1, 2]  # seen long before the window: not counted
+    assert nearness_rank(*old, "feet", 7) == -480.0
+
+
+def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the_plate() -> None:
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.foreground import surroundings_fill
+    from glimpse.ingest.tracker import Tracker
+
+    image = np.zeros((240, 320, 3), np.uint8)
+    image[:, :160] = (200, 40, 40)
+    image[:, 160:] = (40, 40, 200)
+    person = np.zeros((240, 320), bool)
+    person[80:200, 10:40] = True  # inside the red half, 120 px (2.5 sigmas of the fill) from the blue one
+    image[person] = (20, 200, 20)
+    fill = surroundings_fill(image, person)
+    np.testing.assert_allclose(fill[140, 25], (200, 40, 40), atol=6)  # the person's own pixels do not count
+    tracker = Tracker.__new__(Tracker)
+    tracker.config = load_ingest_config()
+    moved = np.zeros_like(person)
+    moved[80:200, 200:240] = True  # a second person, who walked: the plate shows the background behind them
+    image[moved] = (20, 200, 20)
+    tracker.plate = image.copy()
+    tracker.plate[moved] = (40, 40, 200)  # the first stood still all video: the plate shows them
+    painted = tracker._painted_over(image, person | moved)
+    np.testing.assert_allclose(painted[140, 25], (200, 40, 40), atol=6)
+    assert np.array_equal(painted[140, 220], (40, 40, 200))
+    assert np.array_equal(painted[~(person | moved)], image[~(person | moved)])
+
+
+def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_that_tracks_person() -> None:
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.tracker import Observation, Track, Tracker
+
+    def look(red: float) -> np.ndarray:  # two halves of 4 bins, normalised
+        half = np.array([red, 1.0 - red, 0.0, 0.0])
+        return np.stack([half, half])
+
+    def observation(x: float, colour: float) -> Observation:
+        region = Region(np.array([x, 50.0]), 80.0, 0.0)
+        return Observation(_landmarks_at(np.tile([x, 50.0], (BODY_LANDMARKS, 1)), region), None, None,
+                           np.array([x - 10, 10, x + 10, 90]), look(colour), 1.0, np.ones((17, 3)))
+
+    tracker = Tracker.__new__(Tracker)
+    tracker.config = load_ingest_config()
+    adult = Track(0, None, look(1.0))
+    tracker.tracks = [adult]
+    slid = observation(50.0, 0.6)  # half on the child in front: looks 0.6 like the adult
+    followed = {0: slid}
+    elsewhere, adult_found = observation(200.0, 1.0), observation(60.0, 0.95)
+    fresh = [elsewhere, adult_found]
+    tracker._reclaim(fresh, followed)
+    # far away: not the track's person, whatever they look like
+    assert followed[0] is adult_found and len(fresh) == 1 and fresh[0] is elsewhere
+    followed, fresh = {0: slid}, [observation(60.0, 0.65)]  # hardly better: a new person beside them
+    tracker._reclaim(fresh, followed)
+    assert followed[0] is slid and len(fresh) == 1

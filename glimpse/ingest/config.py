@@ -39,6 +39,7 @@ class IngestConfig:
     track_max_missing_frames: int
     track_reid_max_distance: float
     track_follow_max_distance: float
+    track_reclaim_margin: float
     track_min_frames: int
     track_min_height: float
     track_switch_distance: float
@@ -55,6 +56,7 @@ class IngestConfig:
     mask_threshold: float
     mask_body_radius: float
     mask_depth_cue: Literal["feet", "bones"]
+    mask_depth_frames: int
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
     appearance_bins: int

@@ -7,7 +7,8 @@ each connected blob is one candidate. A blob wider than ``foreground_person_aspe
 several people side by side (people who walk together merge into one blob): it is looked at whole and cut into
 that many person-wide windows. The landmark model, given a crop with two people in it, often finds neither, so
 each window is looked at with the rest of the blob painted over by the plate, and every candidate with the
-people already found painted over too: the model sees one person.
+people already found painted over too: the model sees one person. Where the plate cannot paint someone over
+(it shows them: they stood still), :func:`surroundings_fill` gives the colour around them.
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region
 
 OPEN_KERNEL_PX = 5  # opening that removes specks of noise (pixels, at the tracking size)
+FILL_DOWNSCALE = 8  # surroundings_fill computes its colours at 1/8 size
+FILL_SIGMA_PX = 48.0  # pixels: the reach of its Gaussian weights (about a torso's width at 1280 px)
+FILL_MIN_WEIGHT = 1e-3  # share of outside pixels under which its normalised convolution is not divided further
 
 
 @dataclass(frozen=True)
@@ -62,3 +66,19 @@ def foreground_candidates(image: np.ndarray, plate: np.ndarray, explained: np.nd
             region = Region(np.array([(x0 + x1 - 1) / 2, y + (h - 1) / 2]), side, 0.0)
             candidates.append(ForegroundCandidate(region, explained | (blob & ((columns < x0) | (columns >= x1)))))
     return candidates
+
+
+def surroundings_fill(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """[H, W, 3] uint8: at each pixel the mean colour of the image outside ``pixels`` [H, W] bool nearby, weighted
+    by a Gaussian of FILL_SIGMA_PX (normalised convolution at 1/FILL_DOWNSCALE size). Covers people with something
+    that has no person's edges or texture."""
+    height, width = pixels.shape
+    small = (max(1, width // FILL_DOWNSCALE), max(1, height // FILL_DOWNSCALE))
+    outside = ~pixels
+    weight = cv2.resize(outside.astype(np.float32), small, interpolation=cv2.INTER_AREA)
+    colour = cv2.resize(image.astype(np.float32) * outside[..., None], small, interpolation=cv2.INTER_AREA)
+    sigma = FILL_SIGMA_PX / FILL_DOWNSCALE
+    weight = cv2.GaussianBlur(weight, (0, 0), sigma)
+    colour = cv2.GaussianBlur(colour, (0, 0), sigma)
+    fill = colour / np.maximum(weight, FILL_MIN_WEIGHT)[..., None]
+    return np.clip(cv2.resize(fill, (width, height), interpolation=cv2.INTER_LINEAR), 0, 255).astype(np.uint8)

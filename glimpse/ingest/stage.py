@@ -41,7 +41,8 @@ from glimpse.ingest.report import (
 )
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
-from glimpse.ingest.tracker import Track, Tracker, depth_ordered_labels
+from glimpse.ingest.depth_order import depth_ordered_labels
+from glimpse.ingest.tracker import Track, Tracker
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
@@ -216,7 +217,7 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
         tracked = resized(rgb, track_size)
         observed = tracker.step(frame_id, tracked)
         labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius,
-                                      config.mask_depth_cue)
+                                      config.mask_depth_cue, config.mask_depth_frames)
         cv2.imwrite(str(_label_path(work, frame_id)), labels)
         if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
             save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)

@@ -8,23 +8,25 @@ Per frame (BlazePose's own scheme, extended to several people):
    someone else.
 2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
    someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
-   behind*: its region again with the people already found painted over by the background plate (grey for a
-   moving camera), which leaves whoever they hide. A track that found nobody while its region overlaps
-   someone found looks behind too. Only the found people's pixels nearer to their own skeleton than to where
-   the hidden person's skeleton is expected (the last one moved by the velocity) are painted, and what the
-   track finds must look like it (as when following; closer still for a track that was already missing) and
-   must not lie mostly on the bodies of the people found.
+   behind*: its region again with the people already found painted over by the background plate (where the
+   plate does not show the background, by their surroundings' colour), which leaves whoever they hide. A track
+   that found nobody while its region overlaps someone found looks behind too. Only the found people's pixels
+   nearer to their own skeleton than to where the hidden person's skeleton is expected (the last one moved by
+   the velocity) are painted, and what the track finds must look like it (as when following; closer still for
+   a track that was already missing) and must not lie mostly on the bodies of the people found.
 3. **Find.** Candidate regions come from the pose detector (BlazePose's on the whole frame and on overlapping
    tiles for small people, or the user's ONNX detector), and, for a fixed camera, from pixels that differ
    from the background plate and no found person's body explains (people seen from behind, whom the
    face-keyed detector misses; :mod:`glimpse.ingest.foreground`: blobs of people side by side are also cut
    into person-wide windows, looked at with the rest painted over by the plate, and what remains is looked
    at again after a round that found someone). A candidate no found person covers is looked at by the
-   landmark model; what it finds is kept unless it is someone found already or lies mostly on their bodies.
-4. **Re-identify.** New observations are matched to hidden and lost tracks by appearance (Hungarian method);
-   what stays unmatched starts a new track.
+   landmark model, with the people found painted over; what it finds is kept unless it is someone found
+   already or lies mostly on their bodies.
+4. **Reclaim and re-identify.** A new observation that overlaps what a track followed and looks like that track
+   clearly better is the track's person (the followed fit had slid half onto someone else). The others are
+   matched to hidden and lost tracks by appearance (Hungarian method); what stays unmatched starts a new track.
 
-Masks are depth-ordered (:func:`depth_ordered_labels`): people are ranked by where their feet are in the image
+Masks are depth-ordered (:func:`glimpse.ingest.depth_order.depth_ordered_labels`): people are ranked by where their feet are in the image
 (lower = nearer, for people on one floor), or by a depth proxy (metric bone lengths from the landmark model's 3D
 output over their lengths in pixels); a pixel several segmentations claim goes to the nearest person whose
 skeleton passes close to it, else to the closest skeleton.
@@ -49,7 +51,7 @@ from glimpse.ingest.blazepose import (
 )
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
-from glimpse.ingest.foreground import foreground_candidates
+from glimpse.ingest.foreground import foreground_candidates, surroundings_fill
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
 # Bones (BlazePose landmark pairs) whose metric and pixel lengths give the depth proxy: shoulders-hips,
@@ -67,7 +69,8 @@ PART_INSIDE = 0.9  # share of a small observation's landmark box inside a larger
 VELOCITY_SMOOTHING = 0.5  # weight of the newest displacement in a track's velocity
 UNMATCHED = 1e6  # assignment cost of a pair that must not match
 SAME_REGION_IOU = 0.9  # a foreground region this close (IoU) to one looked at in an earlier round is not looked again
-PAINT_GREY = 128  # what covers found people when a track looks behind them without a background plate
+STILL_WIDTH = 0.02  # fraction of the frame's height: where the plate shows a found person in a region at least
+# this wide, they stood still (specks where their colour matches the background's are painted by the plate)
 
 
 @dataclass
@@ -204,11 +207,12 @@ class Tracker:
         self.tracks: list[Track] = []
 
     # ------------------------------------------------------------------ one person in one region
-    def observe(self, image: np.ndarray, region: Region, look_image: np.ndarray | None = None
-                ) -> Observation | None:
+    def observe(self, image: np.ndarray, region: Region, original: np.ndarray | None = None,
+                covered: np.ndarray | None = None) -> Observation | None:
         """Landmarks in ``region`` (re-centred ``landmark_refine_steps`` times), or None when nobody is there.
-        look_image: the image the appearance is taken from (default ``image``; the unpainted frame when
-        ``image`` has people painted over)."""
+        When ``image`` has pixels ``covered`` [H, W] bool painted over (:meth:`_painted_over`), ``original`` is
+        the frame before; the appearance is taken from it, over the person's mask less the covered pixels (the
+        model's segmentation often goes on over them, where the frame shows someone else)."""
         config = self.config
         for _ in range(config.landmark_refine_steps):
             found = self.model.landmarks(image, region, refine=False)
@@ -226,7 +230,8 @@ class Tracker:
         box = np.concatenate([inside.min(0), inside.max(0)])
         split = float(found.points[list(MID_HIPS), 1].mean())
         points, confidence = found.coco17()
-        look = appearance(image if look_image is None else look_image, mask, split, config.appearance_bins)
+        own = mask if covered is None else mask & ~covered
+        look = appearance(image if original is None else original, own, split, config.appearance_bins)
         return Observation(found, probability, mask, box, look,
                            depth_proxy(found), np.concatenate([points, confidence[:, None]], 1))
 
@@ -248,6 +253,7 @@ class Tracker:
             if track.index in behind:
                 self._look_behind(image, followed, track)
         fresh = self._find_new(image, list(followed.values()))
+        self._reclaim(fresh, followed)
         assigned = self._assign(fresh, [t for t in live if t.index not in followed], frame_id)
         for track, observation in assigned:
             followed[track.index] = observation
@@ -318,21 +324,31 @@ class Tracker:
         return union
 
     def _painted_over(self, image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-        """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate (grey without one)."""
+        """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and by the colour of
+        their surroundings (:func:`surroundings_fill`) where there is no plate or where the plate shows what the
+        image shows (within ``foreground_threshold``, in regions at least STILL_WIDTH wide): a person who stands
+        still for most of the video is in the plate, and painting them with it would paint them back."""
         painted = image.copy()
-        painted[pixels] = self.plate[pixels] if self.plate is not None else PAINT_GREY
+        unpainted = pixels
+        if self.plate is not None:
+            differs = np.abs(image.astype(np.int16) - self.plate).max(axis=2) > self.config.foreground_threshold
+            painted[pixels] = self.plate[pixels]
+            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, round(STILL_WIDTH * image.shape[0])),) * 2)
+            unpainted = cv2.morphologyEx((pixels & ~differs).astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+        if unpainted.any():
+            painted[unpainted] = surroundings_fill(image, pixels)[unpainted]
         return painted
 
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
         """A track whose region slid onto, or overlaps, someone already found looks again with the found people
-        painted over (by the background plate, else grey) where they are nearer to their own skeleton than to the
+        painted over (:meth:`_painted_over`) where they are nearer to their own skeleton than to the
         track's expected one: the person hidden behind them, if still visible, is who remains."""
         found = list(followed.values())
         hidden = self._bodies(found, image.shape[:2])
         # pixels nearer to where this person should be than to anyone found stay
         own = skeleton_distance(track.predicted_landmarks(), hidden.shape)
         hidden &= np.min([self._skeleton_distance(o) for o in found], axis=0) <= own
-        observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), look_image=image)
+        observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), image, hidden)
         if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap):
             return
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
@@ -343,11 +359,16 @@ class Tracker:
 
     def _find_new(self, image: np.ndarray, observed: list[Observation]) -> list[Observation]:
         fresh: list[Observation] = []
+        painted, painted_for, bodies = image, 0, None  # the people found painted over: the model sees who they hide
         for region in detector_regions(self.model, image, self.config, self.detector):
             boxes = np.array([o.landmarks.region.box() for o in observed + fresh]).reshape(-1, 4)
             if len(boxes) and box_iou(region.box()[None], boxes).max() > self.config.track_covered_iou:
                 continue
-            self._keep_new(self.observe(image, region), observed, fresh)
+            if painted_for != len(observed + fresh):
+                painted_for = len(observed + fresh)
+                bodies = self._bodies(observed + fresh, image.shape[:2])
+                painted = self._painted_over(image, bodies)
+            self._keep_new(self.observe(painted, region, image, bodies), observed, fresh)
         if self.plate is None:
             return fresh
         # unexplained foreground (never covered by a found person, by construction), again after each round that
@@ -364,7 +385,7 @@ class Tracker:
                     continue
                 tried = np.concatenate([tried, box[None]])
                 painted = self._painted_over(image, candidate.paint)
-                self._keep_new(self.observe(painted, candidate.region, look_image=image), observed, fresh)
+                self._keep_new(self.observe(painted, candidate.region, image, candidate.paint), observed, fresh)
             if len(fresh) == found_before:
                 break
         return fresh
@@ -387,6 +408,25 @@ class Tracker:
         body = self._body_pixels(observation)
         others = self._bodies(found, body.shape)
         return np.count_nonzero(body & others) > max_overlap * max(np.count_nonzero(body), 1)
+
+    def _reclaim(self, fresh: list[Observation], followed: dict[int, Observation]) -> None:
+        """A new observation that overlaps what a track followed this frame and looks like that track better, by
+        more than ``track_reclaim_margin``, is the track's person: the followed fit had slid half onto someone
+        else (a crossing). The track takes it (removed from ``fresh``); the followed fit is dropped."""
+        tracks = {t.index: t for t in self.tracks}
+        for observation in list(fresh):
+            best, best_gain = None, self.config.track_reclaim_margin
+            for index, current in followed.items():
+                look = tracks[index].look
+                apart = box_iou(observation.box[None], current.box[None])[0, 0] == 0
+                if apart or not comparable(look, observation.look):
+                    continue
+                gain = appearance_distance(look, current.look) - appearance_distance(look, observation.look)
+                if gain > best_gain:
+                    best, best_gain = index, gain
+            if best is not None:
+                followed[best] = observation
+                fresh[:] = [other for other in fresh if other is not observation]
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
         """Match new observations to tracks not seen this frame (Hungarian, on appearance); start the rest."""
@@ -434,37 +474,3 @@ class Tracker:
         relative = landmarks.coco17_relative3d()
         track.relative3d.append(np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0), confidence[:, None]], 1))
         track.boxes.append(observation.box)
-
-
-def nearness_rank(observation: Observation, cue: str) -> float:
-    """Sort key, smaller = nearer the camera. ``feet``: the lowest landmark's image row, higher up = farther
-    (people on one floor seen from above it; right for a child and an adult alike). ``bones``: the depth proxy,
-    metres per pixel along the bones (the landmark model's metric lengths are an adult's whatever the person's
-    size, so a child is ranked too far)."""
-    return -float(observation.box[3]) if cue == "feet" else observation.depth
-
-
-def depth_ordered_labels(observations: list[tuple[Track, Observation]], shape: tuple[int, int],
-                         threshold: float, body_radius: float, cue: str = "feet") -> np.ndarray:
-    """[H, W] uint16: 0 for nobody, else 1 + the index of the track that owns the pixel.
-
-    A pixel claimed by one person's segmentation is theirs. Where several claim it (the landmark model segments
-    every person in its crop), the nearest person (:func:`nearness_rank` by ``cue``) whose skeleton lies within
-    ``body_radius`` torso lengths takes it (their body hides whoever is behind); otherwise the person whose
-    skeleton is nearest."""
-    labels = np.zeros(shape, np.uint16)
-    if not observations:
-        return labels
-    ordered = sorted(observations, key=lambda pair: nearness_rank(pair[1], cue))
-    claims = np.stack([o.probability > threshold for _, o in ordered])
-    count = claims.sum(0)
-    ids = np.array([t.index + 1 for t, _ in ordered], np.uint16)
-    labels[count == 1] = ids[np.argmax(claims[:, count == 1], axis=0)]
-    contested = count > 1
-    if contested.any():
-        distance = np.stack([skeleton_distance(o.landmarks, shape)[contested] for _, o in ordered])
-        distance = np.where(claims[:, contested], distance, np.inf)
-        on_body = distance < body_radius
-        front = np.where(on_body.any(0), np.argmax(on_body, axis=0), np.argmin(distance, axis=0))
-        labels[contested] = ids[front]
-    return labels
