@@ -26,9 +26,9 @@ Per frame (BlazePose's own scheme, extended to several people):
    clearly better is the track's person (the followed fit had slid half onto someone else). The others are
    matched to hidden and lost tracks by appearance (Hungarian method); what stays unmatched starts a new track.
 
-Masks are depth-ordered (:func:`glimpse.ingest.depth_order.depth_ordered_labels`): people are ranked by where their feet are in the image
-(lower = nearer, for people on one floor), or by a depth proxy (metric bone lengths from the landmark model's 3D
-output over their lengths in pixels); a pixel several segmentations claim goes to the nearest person whose
+Masks are depth-ordered (:mod:`glimpse.ingest.depth_order`): people are ranked by where their feet are in the
+image (lower = nearer, for people on one floor), or by a depth proxy (metric bone lengths from the landmark model's
+3D output over their lengths in pixels); a pixel several segmentations claim goes to the nearest person whose
 skeleton passes close to it, else to the closest skeleton.
 """
 
@@ -329,14 +329,14 @@ class Tracker:
         image shows (within ``foreground_threshold``, in regions at least STILL_WIDTH wide): a person who stands
         still for most of the video is in the plate, and painting them with it would paint them back."""
         painted = image.copy()
-        unpainted = pixels
+        to_fill = pixels
         if self.plate is not None:
             differs = np.abs(image.astype(np.int16) - self.plate).max(axis=2) > self.config.foreground_threshold
             painted[pixels] = self.plate[pixels]
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, round(STILL_WIDTH * image.shape[0])),) * 2)
-            unpainted = cv2.morphologyEx((pixels & ~differs).astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
-        if unpainted.any():
-            painted[unpainted] = surroundings_fill(image, pixels)[unpainted]
+            to_fill = cv2.morphologyEx((pixels & ~differs).astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+        if to_fill.any():
+            painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
         return painted
 
     def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
