@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from glimpse.ingest.tracker import Observation, Track, skeleton_distance
+from glimpse.ingest.tracker import Observation, Track, observed_skeleton_distance
 
 
 def nearness_rank(track: Track, observation: Observation, cue: str, frames: int) -> float:
@@ -42,7 +42,7 @@ def depth_ordered_labels(observations: list[tuple[Track, Observation]], shape: t
     labels[count == 1] = ids[np.argmax(claims[:, count == 1], axis=0)]
     contested = count > 1
     if contested.any():
-        distance = np.stack([skeleton_distance(o.landmarks, shape)[contested] for _, o in ordered])
+        distance = np.stack([observed_skeleton_distance(o)[contested] for _, o in ordered])
         distance = np.where(claims[:, contested], distance, np.inf)
         on_body = distance < body_radius
         front = np.where(on_body.any(0), np.argmax(on_body, axis=0), np.argmin(distance, axis=0))

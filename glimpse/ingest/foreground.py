@@ -33,11 +33,16 @@ class ForegroundCandidate:
     paint: np.ndarray  # [H, W] bool: pixels to replace by the plate before looking (people found, the rest of the blob)
 
 
+def differs_from_plate(pixels: np.ndarray, plate: np.ndarray, threshold: float) -> np.ndarray:
+    """[...] bool: RGB ``pixels`` [..., 3] uint8 farther than ``threshold`` (8-bit levels, any channel) from the
+    plate's ``plate`` [..., 3] at the same places."""
+    return np.abs(pixels.astype(np.int16) - plate.astype(np.int16)).max(axis=-1) > threshold
+
+
 def unexplained_foreground(image: np.ndarray, plate: np.ndarray, explained: np.ndarray, config: IngestConfig
                            ) -> np.ndarray:
     """[H, W] uint8 (0/1): pixels that differ from the plate and that no found person explains, cleaned."""
-    difference = np.abs(image.astype(np.int16) - plate.astype(np.int16)).max(axis=2) > config.foreground_threshold
-    difference &= ~explained
+    difference = differs_from_plate(image, plate, config.foreground_threshold) & ~explained
     opened = cv2.morphologyEx(difference.astype(np.uint8), cv2.MORPH_OPEN,
                               cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (OPEN_KERNEL_PX,) * 2))
     close_px = max(1, round(config.foreground_close * image.shape[0])) | 1

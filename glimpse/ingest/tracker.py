@@ -51,7 +51,7 @@ from glimpse.ingest.blazepose import (
 )
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
-from glimpse.ingest.foreground import foreground_candidates, surroundings_fill
+from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
 # Bones (BlazePose landmark pairs) whose metric and pixel lengths give the depth proxy: shoulders-hips,
@@ -174,6 +174,13 @@ def skeleton_distance(landmarks: PoseLandmarks, shape: tuple[int, int]) -> np.nd
         cv2.line(skeleton, tuple(points[a]), tuple(points[b]), 0, 1)
     distance = cv2.distanceTransform(skeleton, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return distance / torso_length(landmarks)
+
+
+def observed_skeleton_distance(observation: Observation) -> np.ndarray:
+    """:func:`skeleton_distance` of an observation's landmarks over its mask's shape, computed once and kept."""
+    if observation.skeleton_distance is None:
+        observation.skeleton_distance = skeleton_distance(observation.landmarks, observation.mask.shape)
+    return observation.skeleton_distance
 
 
 def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig,
@@ -304,16 +311,11 @@ class Tracker:
         return {t.index for t in live if t.index not in followed
                 and box_iou(t.predicted_region().box()[None], regions).max() > 0}
 
-    def _skeleton_distance(self, observation: Observation) -> np.ndarray:
-        if observation.skeleton_distance is None:
-            observation.skeleton_distance = skeleton_distance(observation.landmarks, observation.mask.shape)
-        return observation.skeleton_distance
-
     def _body_pixels(self, observation: Observation) -> np.ndarray:
         """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
         the segmentation also covers other people in the crop)."""
         if observation.body is None:
-            observation.body = observation.mask & (self._skeleton_distance(observation) < self.config.mask_body_radius)
+            observation.body = observation.mask & (observed_skeleton_distance(observation) < self.config.mask_body_radius)
         return observation.body
 
     def _bodies(self, observations: list[Observation], shape: tuple[int, int]) -> np.ndarray:
@@ -331,10 +333,11 @@ class Tracker:
         painted = image.copy()
         to_fill = pixels
         if self.plate is not None:
-            differs = np.abs(image.astype(np.int16) - self.plate).max(axis=2) > self.config.foreground_threshold
             painted[pixels] = self.plate[pixels]
+            still = np.zeros_like(pixels)
+            still[pixels] = ~differs_from_plate(image[pixels], self.plate[pixels], self.config.foreground_threshold)
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, round(STILL_WIDTH * image.shape[0])),) * 2)
-            to_fill = cv2.morphologyEx((pixels & ~differs).astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+            to_fill = cv2.morphologyEx(still.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
         if to_fill.any():
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
         return painted
@@ -347,7 +350,7 @@ class Tracker:
         hidden = self._bodies(found, image.shape[:2])
         # pixels nearer to where this person should be than to anyone found stay
         own = skeleton_distance(track.predicted_landmarks(), hidden.shape)
-        hidden &= np.min([self._skeleton_distance(o) for o in found], axis=0) <= own
+        hidden &= np.min([observed_skeleton_distance(o) for o in found], axis=0) <= own
         observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), image, hidden)
         if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap):
             return
