@@ -128,13 +128,12 @@ inline int count_lanes(Ints mask) {  // lanes set (all bits) in a comparison's r
   for (int i = 0; i < kLanes; ++i) count -= mask[i];
   return count;
 }
-
 inline bool any_lane(Ints mask) {
   int32_t bits = 0;
   for (int i = 0; i < kLanes; ++i) bits |= mask[i];
   return bits != 0;
 }
-inline float sum_lanes(Floats v) {  // in lane order, as the scalar loop this replaced
+inline float sum_lanes(Floats v) {  // lane by lane, in order: the same sum on every build and run
   float sum = 0.0f;
   for (int i = 0; i < kLanes; ++i) sum += v[i];
   return sum;
