@@ -13,7 +13,7 @@
 // state is stored channel-major, so every channel is one more vector. Every store writes a whole vector
 // (the old value where a pixel is not hit): the loops GCC vectorised itself turned the state updates
 // into masked stores, which AMD CPUs execute slowly and which stall the next Gaussian's loads of the
-// same pixels (no store forwarding); written this way the forward is about 1.3x faster. The backward
+// same pixels (no store forwarding); written this way the forward is about 1.2x faster. The backward
 // walks each tile back to front the same way, sums each Gaussian's gradients per lane (one horizontal
 // sum per Gaussian and tile), keeps per-thread gradient buffers (no atomics) and sums them in parallel.
 #include <torch/extension.h>
