@@ -315,7 +315,8 @@ class Tracker:
         """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
         the segmentation also covers other people in the crop)."""
         if observation.body is None:
-            observation.body = observation.mask & (observed_skeleton_distance(observation) < self.config.mask_body_radius)
+            near = observed_skeleton_distance(observation) < self.config.mask_body_radius
+            observation.body = observation.mask & near
         return observation.body
 
     def _bodies(self, observations: list[Observation], shape: tuple[int, int]) -> np.ndarray:
@@ -347,12 +348,12 @@ class Tracker:
         painted over (:meth:`_painted_over`) where they are nearer to their own skeleton than to the
         track's expected one: the person hidden behind them, if still visible, is who remains."""
         found = list(followed.values())
-        hidden = self._bodies(found, image.shape[:2])
+        bodies = self._bodies(found, image.shape[:2])
         # pixels nearer to where this person should be than to anyone found stay
-        own = skeleton_distance(track.predicted_landmarks(), hidden.shape)
-        hidden &= np.min([observed_skeleton_distance(o) for o in found], axis=0) <= own
+        own = skeleton_distance(track.predicted_landmarks(), bodies.shape)
+        hidden = bodies & (np.min([observed_skeleton_distance(o) for o in found], axis=0) <= own)
         observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), image, hidden)
-        if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap):
+        if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap, bodies):
             return
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
         limit = self.config.track_reid_max_distance if track.missing else self.config.track_follow_max_distance
@@ -371,7 +372,7 @@ class Tracker:
                 painted_for = len(observed + fresh)
                 bodies = self._bodies(observed + fresh, image.shape[:2])
                 painted = self._painted_over(image, bodies)
-            self._keep_new(self.observe(painted, region, image, bodies), observed, fresh)
+            self._keep_new(self.observe(painted, region, image, bodies), observed, fresh, bodies)
         if self.plate is None:
             return fresh
         # unexplained foreground (never covered by a found person, by construction), again after each round that
@@ -393,23 +394,26 @@ class Tracker:
                 break
         return fresh
 
-    def _keep_new(self, observation: Observation | None, observed: list[Observation], fresh: list[Observation]
-                  ) -> None:
-        """Add a candidate's observation to ``fresh`` unless it is nobody or :meth:`_taken`."""
+    def _keep_new(self, observation: Observation | None, observed: list[Observation], fresh: list[Observation],
+                  found_bodies: np.ndarray | None = None) -> None:
+        """Add a candidate's observation to ``fresh`` unless it is nobody or :meth:`_taken` (``found_bodies``: the
+        union of ``observed + fresh``'s bodies when the caller has it)."""
         if observation is not None and not self._taken(observation, observed + fresh,
-                                                       self.config.track_new_max_overlap):
+                                                       self.config.track_new_max_overlap, found_bodies):
             fresh.append(observation)
 
-    def _taken(self, observation: Observation, found: list[Observation], max_overlap: float) -> bool:
+    def _taken(self, observation: Observation, found: list[Observation], max_overlap: float,
+               found_bodies: np.ndarray | None = None) -> bool:
         """Whether an observation shows someone already ``found``, or lies mostly on their bodies (more than
         ``max_overlap`` of its own body's pixels): a fit that took the limbs of the person in front for those of
-        someone they hide, whose mask would take the front person's pixels."""
+        someone they hide, whose mask would take the front person's pixels. ``found_bodies``: their union
+        (:meth:`_bodies`), when the caller has it already."""
         if any(one_person(observation, other, self.config) for other in found):
             return True
         if not found:
             return False
         body = self._body_pixels(observation)
-        others = self._bodies(found, body.shape)
+        others = self._bodies(found, body.shape) if found_bodies is None else found_bodies
         return np.count_nonzero(body & others) > max_overlap * max(np.count_nonzero(body), 1)
 
     def _reclaim(self, fresh: list[Observation], followed: dict[int, Observation]) -> None:
