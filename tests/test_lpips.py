@@ -81,6 +81,21 @@ def test_batched_equals_unbatched_and_symmetric(modules) -> None:
         assert float(modules["alex"](a, a).abs().max()) == 0.0
 
 
+def test_distances_to_one_target_equal_forward_one_by_one(modules) -> None:
+    """The metrics' batched form (the target once, a black image from the cache) gives forward's values."""
+    pairs = [p for p in GOLDEN_VALUES["pairs"] if (p["height"], p["width"]) == (64, 64)]
+    target = read_png(pairs[0]["a"]).float()
+    preds = [read_png(p["b"]).float() for p in pairs] + [torch.zeros_like(target)]
+    for net, module in modules.items():
+        with torch.no_grad():
+            expected = [float(module(pred, target)) for pred in preds]
+        for _ in range(2):  # the second call takes the black image's features from the cache
+            got = [float(value) for value in module.distances_to(preds, target)]
+            assert got == pytest.approx(expected, rel=1e-6, abs=1e-7), net
+        with pytest.raises(ValueError, match="H, W, 3"):
+            module.distances_to([target[:32]], target)
+
+
 def test_parameters_frozen_and_gradients_flow(modules) -> None:
     for net, module in modules.items():
         assert not any(p.requires_grad for p in module.parameters()), net

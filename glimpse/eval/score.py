@@ -40,6 +40,7 @@ from glimpse.metrics.table import (
     FrameMetrics,
     MetricsRow,
     frame_metrics,
+    frame_metrics_against,
     summarize,
     table_json,
     table_markdown,
@@ -107,16 +108,19 @@ def score_views(view_set: ViewSet, people: list[PersonGaussians], background: Ga
         seen_px = torch.as_tensor(union & ~view_bodies.never_seen, device=device)
         if union.any():
             unseen_share.append(float(unseen.sum()) / float(union.sum()))
-        for label, picture in candidates.items():
-            humans[label].append(frame_metrics(view.name, picture, masked_target, lpips_module))
-            for table, region in ((seen, seen_px), (never_seen, unseen)):
-                if region.any():
-                    table[label].append(frame_metrics(view.name, picture, masked_target, lpips_module, region))
+        for table, region in ((humans, None), (seen, seen_px), (never_seen, unseen)):
+            if region is None or region.any():
+                scores = frame_metrics_against(view.name, list(candidates.values()), masked_target, lpips_module,
+                                               region)
+                for label, score in zip(candidates, scores, strict=True):
+                    table[label].append(score)
         for pid, mask in masks.items():
             if pid in per_person and mask.any():
-                mask_t = torch.as_tensor(mask, device=device)
-                for label, picture in ((pid, candidates[RENDER_ROW]), (person_flat_row(pid), candidates[FLAT_ROW])):
-                    per_person[label].append(frame_metrics(view.name, picture, target, lpips_module, mask_t))
+                rows = {pid: candidates[RENDER_ROW], person_flat_row(pid): candidates[FLAT_ROW]}
+                scores = frame_metrics_against(view.name, list(rows.values()), target, lpips_module,
+                                               torch.as_tensor(mask, device=device))
+                for label, score in zip(rows, scores, strict=True):
+                    per_person[label].append(score)
         full = render_view(view, people, background, render, device)
         composite.append(frame_metrics(view.name, full, target, lpips_module))
     net = lpips_module.net_name

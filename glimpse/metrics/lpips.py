@@ -14,7 +14,7 @@ distance (``[B]`` or 0-d); papers report it x100 (``LPIPS_REPORT_SCALE``).
 from __future__ import annotations
 
 import importlib.util
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -161,6 +161,9 @@ class LPIPS(nn.Module):
         self._load(params)
         self.requires_grad_(False)
         self.eval()
+        # unit features of an all-black image per (shape, dtype, device): the empty-render baseline, scored
+        # against every target (distances_to)
+        self._black_features: dict[tuple, list[Tensor]] = {}
 
     def _load(self, params: Mapping[str, Any]) -> None:
         backbone_name = _CHECKPOINTS[self.net_name][1]
@@ -189,10 +192,41 @@ class LPIPS(nn.Module):
             with torch.no_grad():
                 fixed = self._unit_features(target.reshape(-1, *target.shape[-3:]))
             pairs = list(zip(self._unit_features(pred.reshape(-1, *pred.shape[-3:])), fixed, strict=True))
+        distance = self._distance(pairs)
+        return distance[0] if unbatched else distance
+
+    @torch.no_grad()
+    def distances_to(self, preds: Sequence[Tensor], target: Tensor) -> list[Tensor]:
+        """LPIPS of each of ``preds`` against one ``target``, all ``[H, W, 3]`` in [0, 1]: raw 0-d tensors, as
+        ``forward`` gives one by one. The target and the preds go through the network in one batch (about 1.5x
+        faster than one by one on a CPU), the target once; an all-black pred's features are kept from call to
+        call (the empty-render baseline is scored against every target). No gradients."""
+        for pred in preds:
+            if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != 3:
+                raise ValueError(f"LPIPS takes [H, W, 3] images, found {tuple(pred.shape)} and {tuple(target.shape)}")
+        black = [not pred.any() for pred in preds]
+        key = (tuple(target.shape), target.dtype, target.device)
+        if any(black) and key not in self._black_features:
+            self._black_features[key] = self._unit_features(torch.zeros_like(target)[None])
+        computed = [pred for pred, is_black in zip(preds, black, strict=True) if not is_black]
+        features = self._unit_features(torch.stack([target, *computed]))
+        fixed = [layer[:1] for layer in features]
+        distances, row = [], 1
+        for is_black in black:
+            if is_black:
+                own = self._black_features[key]
+            else:
+                own = [layer[row:row + 1] for layer in features]
+                row += 1
+            distances.append(self._distance(list(zip(own, fixed, strict=True)))[0])
+        return distances
+
+    def _distance(self, pairs: list[tuple[Tensor, Tensor]]) -> Tensor:
+        """``[B]`` from the tapped unit features of both images per layer."""
         distance = pairs[0][0].new_zeros(pairs[0][0].shape[0])
         for head, (feats_pred, feats_target) in zip(self.heads, pairs, strict=True):
             distance = distance + head((feats_pred - feats_target) ** 2).mean(dim=(1, 2, 3))
-        return distance[0] if unbatched else distance
+        return distance
 
     def _unit_features(self, images: Tensor) -> list[Tensor]:
         """``[N, H, W, 3]`` in [0, 1] -> the 5 tapped feature maps ``[N, C_k, H_k, W_k]``, each

@@ -79,17 +79,21 @@ def frame_metrics(
     frame: str, pred: Tensor, target: Tensor, lpips_module: LPIPS, mask: Tensor | None = None
 ) -> FrameMetrics:
     """Score one frame. pred, target: ``[H, W, 3]`` in [0, 1]; mask: optional ``[H, W]``."""
+    return frame_metrics_against(frame, [pred], target, lpips_module, mask)[0]
+
+
+@torch.no_grad()
+def frame_metrics_against(
+    frame: str, preds: Sequence[Tensor], target: Tensor, lpips_module: LPIPS, mask: Tensor | None = None
+) -> list[FrameMetrics]:
+    """``frame_metrics`` of each of ``preds`` against one target in one mask; LPIPS sees the target once."""
     if mask is None:
-        lpips_value = lpips_module(pred, target)
+        lpips_values = lpips_module.distances_to(preds, target)
     else:
-        weights = mask.to(pred.dtype).unsqueeze(-1)
-        lpips_value = lpips_module(pred * weights, target * weights)
-    return FrameMetrics(
-        frame=frame,
-        psnr=float(psnr(pred, target, mask)),
-        ssim=float(ssim(pred, target, mask)),
-        lpips=float(lpips_value),
-    )
+        weights = mask.to(target.dtype).unsqueeze(-1)
+        lpips_values = lpips_module.distances_to([pred * weights for pred in preds], target * weights)
+    return [FrameMetrics(frame=frame, psnr=float(psnr(pred, target, mask)), ssim=float(ssim(pred, target, mask)),
+                         lpips=float(lpips_value)) for pred, lpips_value in zip(preds, lpips_values, strict=True)]
 
 
 def _mean(values: Sequence[float]) -> float:
