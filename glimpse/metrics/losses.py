@@ -14,8 +14,9 @@ import math
 import torch
 from torch import Tensor
 
-from glimpse.metrics.image import SSIM_RADIUS, ssim_map
+from glimpse.metrics.image import SSIM_RADIUS
 from glimpse.metrics.lpips import LPIPS
+from glimpse.metrics.ssim_cpu import ssim_map_for_loss
 
 # -log(exp(-a) + exp(a - 1)) is smallest at a = 0 and a = 1, where it equals -log(1 + e^-1);
 # adding log(1 + e^-1) = 0.31326... makes the minimum exactly 0 (LOLNeRF; the authors' code
@@ -50,7 +51,7 @@ def dssim_loss(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tens
     Without a mask: 1 - mean of the SSIM map less its 5-pixel border (scikit-image's mean);
     with one: 1 - mean of the full map over the masked pixels. Images need H, W >= 11.
     """
-    full = ssim_map(pred, target)
+    full = ssim_map_for_loss(pred, target)
     if mask is None:
         return 1.0 - full[..., SSIM_RADIUS:-SSIM_RADIUS, SSIM_RADIUS:-SSIM_RADIUS, :].mean()
     return 1.0 - _pooled_mean(full, mask)

@@ -514,6 +514,12 @@ std::vector<torch::Tensor> covariance_backward(torch::Tensor quats, torch::Tenso
 torch::Tensor sh_forward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs);
 std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, torch::Tensor dirs, torch::Tensor v_rgb);
 
+// ssim_cpu.cpp
+std::vector<torch::Tensor> ssim_forward(torch::Tensor pred, torch::Tensor target, torch::Tensor taps, double c1,
+                                        double c2);
+torch::Tensor ssim_backward(torch::Tensor grad_map, torch::Tensor pred, torch::Tensor target, torch::Tensor moments,
+                            torch::Tensor taps, double c1, double c2);
+
 // pose_cpu.cpp
 std::vector<torch::Tensor> pose_forward(torch::Tensor weights, torch::Tensor joint_transforms,
                                         torch::Tensor canonical_inverse, torch::Tensor means, torch::Tensor covariances,
@@ -539,6 +545,8 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("sh_backward", &sh_backward, "Colours from spherical harmonics, backward (CPU)");
   m.def("forward", &composite_forward, "Gaussian compositing, forward (CPU)");
   m.def("backward", &composite_backward, "Gaussian compositing, backward (CPU)");
+  m.def("ssim_forward", &ssim_forward, "SSIM map and blurred moments, fused (CPU)");
+  m.def("ssim_backward", &ssim_backward, "SSIM map's gradient with respect to the first image, fused (CPU)");
   m.def("pose_forward", &pose_forward, "Posing a frozen person's Gaussians, forward (CPU)");
   m.def("skin_forward", &skin_forward, "Posing canonical Gaussians for training, forward (CPU)");
   m.def("skin_backward", &skin_backward, "Posing canonical Gaussians for training, backward (CPU)");
