@@ -143,13 +143,20 @@ def test_binning_loses_nothing():
 
 
 @needs_cpu_kernel
-def test_cpu_binning_equals_torch_binning():
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_cpu_binning_equals_torch_binning(threads):
+    """The C++ binning shares its work among threads; every thread count gives the serial lists."""
     params, cam = scene("border", n=500), camera(70, 50)
     p = project_gaussians(params["means"], quat_scale_to_covariance(params["quats"], params["scales"]),
                           params["opacities"], cam)
     p.depths[::7] = p.depths[3]  # ties broken by index in both
     a = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16, use_cpu_kernel=False)
-    b = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16, use_cpu_kernel=True)
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        b = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16, use_cpu_kernel=True)
+    finally:
+        torch.set_num_threads(before)
     assert torch.equal(a.gaussian_ids, b.gaussian_ids) and torch.equal(a.tile_offsets, b.tile_offsets)
 
 

@@ -435,6 +435,10 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
 // (mean +- extents, pixels) overlaps, by counting sort, which keeps every tile's list in depth order.
 // means2d [N, 2], extents [N, 2], depths [N] float32; visible [N] bool. Returns gaussian_ids [M] int32
 // and tile_offsets [tiles + 1] int32.
+//
+// Threaded without changing a single entry: each thread takes one contiguous share of the Gaussians (of the
+// index range, then of the sorted order) and counts into its own histograms; the scans give every thread the
+// positions after those of the threads before it, so every scatter keeps the serial order.
 std::vector<torch::Tensor> bin_gaussians(torch::Tensor means2d, torch::Tensor extents, torch::Tensor depths,
                                          torch::Tensor visible, int64_t width, int64_t height, int64_t tile) {
   TORCH_CHECK(means2d.dtype() == torch::kFloat32 && extents.dtype() == torch::kFloat32 &&
@@ -445,56 +449,111 @@ std::vector<torch::Tensor> bin_gaussians(torch::Tensor means2d, torch::Tensor ex
   const int64_t tiles = tiles_x * tiles_y;
   const float *m = means2d.data_ptr<float>(), *ex = extents.data_ptr<float>(), *z = depths.data_ptr<float>();
   const bool* vis = visible.data_ptr<bool>();
-  // keys: the depth's bits made to order as the floats do (flip all bits of negatives, the sign of positives)
-  std::vector<uint32_t> keys, keys_tmp;
-  std::vector<int> ids, ids_tmp;
-  for (int64_t n = 0; n < N; ++n) {
-    if (!vis[n]) continue;
-    uint32_t bits;
-    std::memcpy(&bits, z + n, sizeof bits);
-    keys.push_back(bits & 0x80000000u ? ~bits : bits | 0x80000000u);
-    ids.push_back(static_cast<int>(n));
-  }
-  const int64_t V = static_cast<int64_t>(ids.size());
-  keys_tmp.resize(V);
-  ids_tmp.resize(V);
   constexpr int kRadixBits = 8, kBuckets = 1 << kRadixBits;
-  for (int shift = 0; shift < 32; shift += kRadixBits) {
-    int64_t count[kBuckets + 1] = {0};
-    for (int64_t v = 0; v < V; ++v) ++count[((keys[v] >> shift) & (kBuckets - 1)) + 1];
-    for (int i = 0; i < kBuckets; ++i) count[i + 1] += count[i];
-    for (int64_t v = 0; v < V; ++v) {
-      const int64_t to = count[(keys[v] >> shift) & (kBuckets - 1)]++;
-      keys_tmp[to] = keys[v];
-      ids_tmp[to] = ids[v];
-    }
-    keys.swap(keys_tmp);
-    ids.swap(ids_tmp);
-  }
-  // each Gaussian's inclusive tile rectangle, computed as binning.py does (float32 division, floor, clamp)
-  std::vector<int> rects(4 * V);
-  const float size = static_cast<float>(tile);
-  auto clamp = [](int64_t value, int64_t hi) { return static_cast<int>(std::min(std::max<int64_t>(value, 0), hi)); };
-  for (int64_t v = 0; v < V; ++v) {
-    const int g = ids[v];
-    rects[4 * v] = clamp(static_cast<int64_t>(std::floor((m[2 * g] - ex[2 * g]) / size)), tiles_x - 1);
-    rects[4 * v + 1] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] - ex[2 * g + 1]) / size)), tiles_y - 1);
-    rects[4 * v + 2] = clamp(static_cast<int64_t>(std::floor((m[2 * g] + ex[2 * g]) / size)), tiles_x - 1);
-    rects[4 * v + 3] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] + ex[2 * g + 1]) / size)), tiles_y - 1);
-  }
+  const int threads = std::max(1, at::get_num_threads());
+  std::vector<int64_t> before(threads + 1, 0);                    // per thread: visible Gaussians before its share
+  std::vector<int64_t> histogram(static_cast<size_t>(threads) * kBuckets);  // [thread][bucket], then positions
+  std::vector<int> tile_counts(static_cast<size_t>(threads) * tiles);     // [thread][tile], then cursors
+  std::vector<uint32_t> keys, keys_tmp;
+  std::vector<int> ids, ids_tmp, rects;
+  int64_t V = 0;
   auto offsets = torch::zeros({tiles + 1}, torch::kInt32);
   int* off = offsets.data_ptr<int>();
-  const int* r = rects.data();
-  for (int64_t v = 0; v < V; ++v)
-    for (int ty = r[4 * v + 1]; ty <= r[4 * v + 3]; ++ty)
-      for (int tx = r[4 * v]; tx <= r[4 * v + 2]; ++tx) ++off[ty * tiles_x + tx + 1];
-  for (int64_t k = 0; k < tiles; ++k) off[k + 1] += off[k];
-  auto entries = torch::empty({off[tiles]}, torch::kInt32);
-  int* out = entries.data_ptr<int>();
-  std::vector<int> fill(off, off + tiles);
-  for (int64_t v = 0; v < V; ++v)
-    for (int ty = r[4 * v + 1]; ty <= r[4 * v + 3]; ++ty)
-      for (int tx = r[4 * v]; tx <= r[4 * v + 2]; ++tx) out[fill[ty * tiles_x + tx]++] = ids[v];
+  torch::Tensor entries;
+  const float size = static_cast<float>(tile);
+  auto clamp = [](int64_t value, int64_t hi) { return static_cast<int>(std::min(std::max<int64_t>(value, 0), hi)); };
+
+#pragma omp parallel num_threads(threads)
+  {
+    const int t = omp_get_thread_num(), team = omp_get_num_threads();  // the team may be smaller than asked
+    auto share = [&](int64_t n, int64_t& lo, int64_t& hi) { lo = n * t / team; hi = n * (t + 1) / team; };
+    int64_t lo, hi;
+    share(N, lo, hi);
+    int64_t count = 0;
+    for (int64_t n = lo; n < hi; ++n) count += vis[n];
+    before[t + 1] = count;
+#pragma omp barrier
+#pragma omp single
+    {
+      for (int i = 0; i < team; ++i) before[i + 1] += before[i];
+      V = before[team];
+      keys.resize(V);
+      keys_tmp.resize(V);
+      ids.resize(V);
+      ids_tmp.resize(V);
+      rects.resize(4 * V);
+    }
+    // keys: the depth's bits made to order as the floats do (flip all bits of negatives, the sign of positives)
+    for (int64_t n = lo, to = before[t]; n < hi; ++n) {
+      if (!vis[n]) continue;
+      uint32_t bits;
+      std::memcpy(&bits, z + n, sizeof bits);
+      keys[to] = bits & 0x80000000u ? ~bits : bits | 0x80000000u;
+      ids[to++] = static_cast<int>(n);
+    }
+    share(V, lo, hi);
+    int64_t* own = histogram.data() + static_cast<size_t>(t) * kBuckets;
+    for (int shift = 0; shift < 32; shift += kRadixBits) {
+#pragma omp barrier
+      std::fill(own, own + kBuckets, 0);
+      for (int64_t v = lo; v < hi; ++v) ++own[(keys[v] >> shift) & (kBuckets - 1)];
+#pragma omp barrier
+#pragma omp single
+      {
+        int64_t position = 0;  // bucket by bucket, thread by thread: a stable sort
+        for (int b = 0; b < kBuckets; ++b)
+          for (int i = 0; i < team; ++i) {
+            const int64_t c = histogram[static_cast<size_t>(i) * kBuckets + b];
+            histogram[static_cast<size_t>(i) * kBuckets + b] = position;
+            position += c;
+          }
+      }
+      for (int64_t v = lo; v < hi; ++v) {
+        const int64_t to = own[(keys[v] >> shift) & (kBuckets - 1)]++;
+        keys_tmp[to] = keys[v];
+        ids_tmp[to] = ids[v];
+      }
+#pragma omp barrier
+#pragma omp single
+      {
+        keys.swap(keys_tmp);
+        ids.swap(ids_tmp);
+      }
+    }
+    // each Gaussian's inclusive tile rectangle, computed as binning.py does (float32 division, floor, clamp)
+    int* counts = tile_counts.data() + static_cast<size_t>(t) * tiles;
+    std::fill(counts, counts + tiles, 0);
+    for (int64_t v = lo; v < hi; ++v) {
+      const int g = ids[v];
+      int* r = rects.data() + 4 * v;
+      r[0] = clamp(static_cast<int64_t>(std::floor((m[2 * g] - ex[2 * g]) / size)), tiles_x - 1);
+      r[1] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] - ex[2 * g + 1]) / size)), tiles_y - 1);
+      r[2] = clamp(static_cast<int64_t>(std::floor((m[2 * g] + ex[2 * g]) / size)), tiles_x - 1);
+      r[3] = clamp(static_cast<int64_t>(std::floor((m[2 * g + 1] + ex[2 * g + 1]) / size)), tiles_y - 1);
+      for (int ty = r[1]; ty <= r[3]; ++ty)
+        for (int tx = r[0]; tx <= r[2]; ++tx) ++counts[ty * tiles_x + tx];
+    }
+#pragma omp barrier
+#pragma omp single
+    {
+      for (int64_t k = 0; k < tiles; ++k) {
+        int position = off[k];
+        for (int i = 0; i < team; ++i) {
+          const int c = tile_counts[static_cast<size_t>(i) * tiles + k];
+          tile_counts[static_cast<size_t>(i) * tiles + k] = position;
+          position += c;
+        }
+        off[k + 1] = position;
+      }
+      entries = torch::empty({off[tiles]}, torch::kInt32);
+    }
+    int* out = entries.data_ptr<int>();
+    for (int64_t v = lo; v < hi; ++v) {
+      const int* r = rects.data() + 4 * v;
+      for (int ty = r[1]; ty <= r[3]; ++ty)
+        for (int tx = r[0]; tx <= r[2]; ++tx) out[counts[ty * tiles_x + tx]++] = ids[v];
+    }
+  }
   return {entries, offsets};
 }
 
