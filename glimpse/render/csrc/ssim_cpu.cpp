@@ -55,24 +55,47 @@ void weighted_lines(float* dst, const float* const* lines, const float* weights,
   }
 }
 
-constexpr int kMaxTaps = 64;
+constexpr int kMaxTaps = 64;  // rows or values one output sums, at most (the adjoint's border: 3 (2r + 1))
 
-// out[i] = sum_k w[k] in[reflect(i + k - r)] along each row of `rows` rows of n values.
-void blur_rows(const float* in, float* out, int64_t rows, int64_t n, Taps taps) {
+// Along each row of `rows` rows of n values: the r values at either end by edge(line, i), the interior i in
+// [r, n - r) as sum_k w[k] line[i - r + interior_offset(k)] (every index inside the line).
+template <typename Edge, typename Offset>
+void filter_rows(const float* in, float* out, int64_t rows, int64_t n, Taps taps, Edge edge, Offset interior_offset) {
   const int r = taps.r;
   at::parallel_for(0, rows, 16, [&](int64_t begin, int64_t end) {
     const float* lines[kMaxTaps];
     for (int64_t row = begin; row < end; ++row) {
       const float* src = in + row * n;
       float* dst = out + row * n;
-      for (int64_t i = 0; i < n; ++i) {
-        if (i >= r && i < n - r) continue;  // the interior below
-        float sum = 0.0f;
-        for (int k = 0; k <= 2 * r; ++k) sum += taps.w[k] * src[reflect(i + k - r, n)];
-        dst[i] = sum;
-      }
-      for (int k = 0; k <= 2 * r; ++k) lines[k] = src + k;  // interior: dst[r + i] = sum_k w[k] src[i + k]
+      for (int64_t i = 0; i < n; ++i)
+        if (i < r || i >= n - r) dst[i] = edge(src, i);
+      for (int k = 0; k <= 2 * r; ++k) lines[k] = src + interior_offset(k);
       weighted_lines(dst + r, lines, taps.w, 2 * r + 1, n - 2 * r, false);
+    }
+  });
+}
+
+// out[i] = sum_k w[k] in[reflect(i + k - r)] along each row of `rows` rows of n values.
+void blur_rows(const float* in, float* out, int64_t rows, int64_t n, Taps taps) {
+  const int r = taps.r;
+  auto edge = [&](const float* line, int64_t i) {
+    float sum = 0.0f;
+    for (int k = 0; k <= 2 * r; ++k) sum += taps.w[k] * line[reflect(i + k - r, n)];
+    return sum;
+  };
+  filter_rows(in, out, rows, n, taps, edge, [](int k) { return k; });
+}
+
+// Each row y of `planes` planes of `height` rows of n values: the sum of the rows and weights that
+// rows(plane, y, lines, weights) lists (it returns how many).
+template <typename Rows>
+void filter_columns(const float* in, float* out, int64_t planes, int64_t height, int64_t n, Rows rows) {
+  at::parallel_for(0, planes * height, 8, [&](int64_t begin, int64_t end) {
+    const float* lines[kMaxTaps];
+    float weights[kMaxTaps];
+    for (int64_t index = begin; index < end; ++index) {
+      const int count = rows(in + index / height * height * n, index % height, lines, weights);
+      weighted_lines(out + index * n, lines, weights, count, n, false);
     }
   });
 }
@@ -80,13 +103,12 @@ void blur_rows(const float* in, float* out, int64_t rows, int64_t n, Taps taps) 
 // out[y] = sum_k w[k] in[reflect(y + k - r)] for rows of width n in each of `planes` planes of `height` rows.
 void blur_columns(const float* in, float* out, int64_t planes, int64_t height, int64_t n, Taps taps) {
   const int r = taps.r;
-  at::parallel_for(0, planes * height, 8, [&](int64_t begin, int64_t end) {
-    const float* lines[kMaxTaps];
-    for (int64_t index = begin; index < end; ++index) {
-      const int64_t plane = index / height, y = index % height;
-      for (int k = 0; k <= 2 * r; ++k) lines[k] = in + (plane * height + reflect(y + k - r, height)) * n;
-      weighted_lines(out + index * n, lines, taps.w, 2 * r + 1, n, false);
+  filter_columns(in, out, planes, height, n, [&](const float* plane, int64_t y, const float** lines, float* weights) {
+    for (int k = 0; k <= 2 * r; ++k) {
+      lines[k] = plane + reflect(y + k - r, height) * n;
+      weights[k] = taps.w[k];
     }
+    return 2 * r + 1;
   });
 }
 
@@ -101,54 +123,39 @@ inline void mirrored_positions(int64_t j, int64_t n, int r, Visit visit) {
   if (j >= n - r) visit(r + 2 * n - 1 - j);
 }
 
-// The adjoint of blur_rows.
+// The adjoint of blur_rows: the interior gathers only its own padded position, dst[i] = sum_k w[k] a[i + r - k].
 void blur_rows_adjoint(const float* in, float* out, int64_t rows, int64_t n, Taps taps) {
   const int r = taps.r;
-  at::parallel_for(0, rows, 16, [&](int64_t begin, int64_t end) {
-    const float* lines[kMaxTaps];
-    for (int64_t row = begin; row < end; ++row) {
-      const float* a = in + row * n;
-      float* dst = out + row * n;
-      for (int64_t j = 0; j < n; ++j) {
-        if (j >= r && j < n - r) continue;  // the interior below
-        float sum = 0.0f;
-        mirrored_positions(j, n, r, [&](int64_t m) {
-          for (int64_t k = std::max<int64_t>(0, m - n + 1); k <= std::min<int64_t>(2 * r, m); ++k)
-            sum += taps.w[k] * a[m - k];
-        });
-        dst[j] = sum;
-      }
-      // interior: only its own padded position, whose taps all fall inside the line: dst[r + j] = sum_k w[k] a[j + 2r - k]
-      for (int k = 0; k <= 2 * r; ++k) lines[k] = a + 2 * r - k;
-      weighted_lines(dst + r, lines, taps.w, 2 * r + 1, n - 2 * r, false);
-    }
-  });
+  auto edge = [&](const float* line, int64_t j) {
+    float sum = 0.0f;
+    mirrored_positions(j, n, r, [&](int64_t m) {
+      for (int64_t k = std::max<int64_t>(0, m - n + 1); k <= std::min<int64_t>(2 * r, m); ++k)
+        sum += taps.w[k] * line[m - k];
+    });
+    return sum;
+  };
+  filter_rows(in, out, rows, n, taps, edge, [r](int k) { return 2 * r - k; });
 }
 
-// The adjoint of blur_columns.
+// The adjoint of blur_columns (up to three padded positions per row: at most 3 (2r + 1) rows).
 void blur_columns_adjoint(const float* in, float* out, int64_t planes, int64_t height, int64_t n, Taps taps) {
   const int r = taps.r;
-  at::parallel_for(0, planes * height, 8, [&](int64_t begin, int64_t end) {
-    const float* lines[kMaxTaps];
-    float weights[kMaxTaps];
-    for (int64_t index = begin; index < end; ++index) {
-      const int64_t plane = index / height, y = index % height;
-      int count = 0;
-      mirrored_positions(y, height, r, [&](int64_t m) {
-        for (int64_t k = std::max<int64_t>(0, m - height + 1); k <= std::min<int64_t>(2 * r, m); ++k) {
-          lines[count] = in + (plane * height + m - k) * n;
-          weights[count++] = taps.w[k];
-        }
-      });
-      weighted_lines(out + index * n, lines, weights, count, n, false);
-    }
+  filter_columns(in, out, planes, height, n, [&](const float* plane, int64_t y, const float** lines, float* weights) {
+    int count = 0;
+    mirrored_positions(y, height, r, [&](int64_t m) {
+      for (int64_t k = std::max<int64_t>(0, m - height + 1); k <= std::min<int64_t>(2 * r, m); ++k) {
+        lines[count] = plane + (m - k) * n;
+        weights[count++] = taps.w[k];
+      }
+    });
+    return count;
   });
 }
 
 Taps check_taps(const torch::Tensor& taps) {
   TORCH_CHECK(taps.dtype() == torch::kFloat32 && taps.dim() == 1 && taps.size(0) % 2 == 1 && taps.is_contiguous() &&
-                  taps.size(0) <= kMaxTaps,
-              "ssim_cpu: an odd number (at most ", kMaxTaps, ") of float32 taps expected");
+                  3 * taps.size(0) <= kMaxTaps,
+              "ssim_cpu: an odd number (at most ", kMaxTaps / 3, ") of float32 taps expected");
   return {taps.data_ptr<float>(), static_cast<int>(taps.size(0) / 2)};
 }
 
@@ -159,26 +166,31 @@ void check_images(const torch::Tensor& pred, const torch::Tensor& target, int r)
   TORCH_CHECK(pred.size(1) > 2 * r && pred.size(2) > 2 * r, "ssim_cpu: images smaller than the window");
 }
 
-// [B, H, W, C] images -> the five moments' planes [5][B * C][H][W]: x, y, x^2, y^2, xy.
-void moment_planes(const torch::Tensor& pred, const torch::Tensor& target, float* out) {
-  const int64_t B = pred.size(0), H = pred.size(1), W = pred.size(2), C = pred.size(3), count = B * C * H * W;
-  const float *x = pred.data_ptr<float>(), *y = target.data_ptr<float>();
+// f(q, pixel) for every pixel and channel: q indexes the planes [B * C][H][W], pixel the images [B, H, W, C].
+template <typename F>
+void for_each_pixel(int64_t B, int64_t H, int64_t W, int64_t C, F f) {
   at::parallel_for(0, B * H, 16, [&](int64_t begin, int64_t end) {
     for (int64_t by = begin; by < end; ++by) {
       const int64_t b = by / H, row = by % H;
       for (int64_t c = 0; c < C; ++c) {
-        float* dst = out + ((b * C + c) * H + row) * W;
-        const float *xs = x + by * W * C + c, *ys = y + by * W * C + c;
-        for (int64_t i = 0; i < W; ++i) {
-          const float xi = xs[i * C], yi = ys[i * C];
-          dst[i] = xi;
-          dst[count + i] = yi;
-          dst[2 * count + i] = xi * xi;
-          dst[3 * count + i] = yi * yi;
-          dst[4 * count + i] = xi * yi;
-        }
+        const int64_t offset = ((b * C + c) * H + row) * W;
+        for (int64_t i = 0; i < W; ++i) f(offset + i, (by * W + i) * C + c);
       }
     }
+  });
+}
+
+// [B, H, W, C] images -> the five moments' planes [5][B * C][H][W]: x, y, x^2, y^2, xy.
+void moment_planes(const torch::Tensor& pred, const torch::Tensor& target, float* out) {
+  const int64_t B = pred.size(0), H = pred.size(1), W = pred.size(2), C = pred.size(3), count = B * C * H * W;
+  const float *x = pred.data_ptr<float>(), *y = target.data_ptr<float>();
+  for_each_pixel(B, H, W, C, [&](int64_t q, int64_t pixel) {
+    const float xi = x[pixel], yi = y[pixel];
+    out[q] = xi;
+    out[count + q] = yi;
+    out[2 * count + q] = xi * xi;
+    out[3 * count + q] = yi * yi;
+    out[4 * count + q] = xi * yi;
   });
 }
 
@@ -214,18 +226,8 @@ std::vector<torch::Tensor> ssim_forward(torch::Tensor pred, torch::Tensor target
   const float* mo = moments.data_ptr<float>();
   float* out = map.data_ptr<float>();
   const float fc1 = static_cast<float>(c1), fc2 = static_cast<float>(c2);
-  at::parallel_for(0, B * H, 16, [&](int64_t begin, int64_t end) {
-    for (int64_t by = begin; by < end; ++by) {
-      const int64_t b = by / H, row = by % H;
-      for (int64_t c = 0; c < C; ++c) {
-        const int64_t offset = ((b * C + c) * H + row) * W;
-        for (int64_t i = 0; i < W; ++i) {
-          const int64_t q = offset + i;
-          out[(by * W + i) * C + c] =
-              ssim_pixel(mo[q], mo[count + q], mo[2 * count + q], mo[3 * count + q], mo[4 * count + q], fc1, fc2).s;
-        }
-      }
-    }
+  for_each_pixel(B, H, W, C, [&](int64_t q, int64_t pixel) {
+    out[pixel] = ssim_pixel(mo[q], mo[count + q], mo[2 * count + q], mo[3 * count + q], mo[4 * count + q], fc1, fc2).s;
   });
   return {map, moments};
 }
@@ -245,22 +247,13 @@ torch::Tensor ssim_backward(torch::Tensor grad_map, torch::Tensor pred, torch::T
   const float *mo = moments.data_ptr<float>(), *g = grad_map.data_ptr<float>();
   float* d = partials.data_ptr<float>();
   const float fc1 = static_cast<float>(c1), fc2 = static_cast<float>(c2);
-  at::parallel_for(0, B * H, 16, [&](int64_t begin, int64_t end) {
-    for (int64_t by = begin; by < end; ++by) {
-      const int64_t b = by / H, row = by % H;
-      for (int64_t c = 0; c < C; ++c) {
-        const int64_t offset = ((b * C + c) * H + row) * W;
-        for (int64_t i = 0; i < W; ++i) {
-          const int64_t q = offset + i;
-          const float mx = mo[q], my = mo[count + q];
-          const Pixel px = ssim_pixel(mx, my, mo[2 * count + q], mo[3 * count + q], mo[4 * count + q], fc1, fc2);
-          const float grad = g[(by * W + i) * C + c], denominator = px.b1 * px.b2;
-          d[q] = grad * (2.0f * my * (px.a2 - px.a1) / denominator + 2.0f * mx * px.s * (1.0f / px.b2 - 1.0f / px.b1));
-          d[count + q] = grad * (-px.s / px.b2);
-          d[2 * count + q] = grad * (2.0f * px.a1 / denominator);
-        }
-      }
-    }
+  for_each_pixel(B, H, W, C, [&](int64_t q, int64_t pixel) {
+    const float mx = mo[q], my = mo[count + q];
+    const Pixel px = ssim_pixel(mx, my, mo[2 * count + q], mo[3 * count + q], mo[4 * count + q], fc1, fc2);
+    const float grad = g[pixel], denominator = px.b1 * px.b2;
+    d[q] = grad * (2.0f * my * (px.a2 - px.a1) / denominator + 2.0f * mx * px.s * (1.0f / px.b2 - 1.0f / px.b1));
+    d[count + q] = grad * (-px.s / px.b2);
+    d[2 * count + q] = grad * (2.0f * px.a1 / denominator);
   });
   auto columns = torch::empty({3, P, H, W}, pred.options());
   auto spread = torch::empty({3, P, H, W}, pred.options());
@@ -269,17 +262,8 @@ torch::Tensor ssim_backward(torch::Tensor grad_map, torch::Tensor pred, torch::T
   auto grad_pred = torch::empty_like(pred);
   const float *s = spread.data_ptr<float>(), *x = pred.data_ptr<float>(), *y = target.data_ptr<float>();
   float* out = grad_pred.data_ptr<float>();
-  at::parallel_for(0, B * H, 16, [&](int64_t begin, int64_t end) {
-    for (int64_t by = begin; by < end; ++by) {
-      const int64_t b = by / H, row = by % H;
-      for (int64_t c = 0; c < C; ++c) {
-        const int64_t offset = ((b * C + c) * H + row) * W;
-        for (int64_t i = 0; i < W; ++i) {
-          const int64_t q = offset + i, pixel = (by * W + i) * C + c;
-          out[pixel] = s[q] + 2.0f * x[pixel] * s[count + q] + y[pixel] * s[2 * count + q];
-        }
-      }
-    }
+  for_each_pixel(B, H, W, C, [&](int64_t q, int64_t pixel) {
+    out[pixel] = s[q] + 2.0f * x[pixel] * s[count + q] + y[pixel] * s[2 * count + q];
   });
   return grad_pred;
 }
