@@ -132,18 +132,19 @@ class _Composite(torch.autograd.Function):
     def forward(ctx, means2d: Tensor, conics: Tensor, opacities: Tensor, features: Tensor, extents: Tensor,
                 bins: TileBins, width: int, height: int) -> Tensor:
         tensors = [t.detach().float().contiguous() for t in (means2d, conics, opacities, features, extents)]
-        image, final_T, last = extension().forward(*tensors, bins.tile_offsets, bins.gaussian_ids, width, height,
-                                                   bins.tile_size)
-        ctx.save_for_backward(*tensors, final_T, last)
+        # the records pack each Gaussian's inputs for the kernels; the backward reads the forward's
+        image, final_T, last, records = extension().forward(*tensors, bins.tile_offsets, bins.gaussian_ids, width,
+                                                            height, bins.tile_size)
+        ctx.save_for_backward(*tensors, final_T, last, records)
         ctx.bins, ctx.size = bins, (width, height)
         return image
 
     @staticmethod
     def backward(ctx, grad_image: Tensor):
-        means2d, conics, opacities, features, extents, final_T, last = ctx.saved_tensors
+        means2d, conics, opacities, features, extents, final_T, last, records = ctx.saved_tensors
         width, height = ctx.size
         grads = extension().backward(means2d, conics, opacities, features, extents, ctx.bins.tile_offsets,
-                                     ctx.bins.gaussian_ids, final_T, last, grad_image.float(), width, height,
+                                     ctx.bins.gaussian_ids, final_T, last, records, grad_image.float(), width, height,
                                      ctx.bins.tile_size)
         return (*grads, None, None, None, None)
 

@@ -112,11 +112,12 @@ inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x
   return t;
 }
 
-// `records` receives a tensor that holds the packed records until the caller returns (64-byte aligned: torch's
-// CPU allocator's alignment).
+// `records` [N, record_stride(C)]: the forward allocates it (64-byte aligned: torch's CPU allocator's alignment)
+// and packs it (pack_records); the backward is given the forward's.
 Inputs make_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& opacities,
                    const torch::Tensor& features, const torch::Tensor& extents, const torch::Tensor& offsets,
-                   const torch::Tensor& ids, int64_t width, int64_t height, int64_t tile, torch::Tensor& records) {
+                   const torch::Tensor& ids, int64_t width, int64_t height, int64_t tile,
+                   const torch::Tensor& records) {
   TORCH_CHECK(means2d.dtype() == torch::kFloat32 && conics.dtype() == torch::kFloat32 &&
                   opacities.dtype() == torch::kFloat32 && features.dtype() == torch::kFloat32 &&
                   extents.dtype() == torch::kFloat32,
@@ -129,7 +130,9 @@ Inputs make_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, co
   const int64_t tiles_x = (width + tile - 1) / tile, tiles_y = (height + tile - 1) / tile;
   TORCH_CHECK(offsets.numel() == tiles_x * tiles_y + 1, "composite_cpu: tile_offsets has the wrong length");
   const int64_t stride = record_stride(features.size(1));
-  records = torch::empty({means2d.size(0), stride}, features.options());
+  TORCH_CHECK(records.dtype() == torch::kFloat32 && records.is_contiguous() && records.dim() == 2 &&
+                  records.size(0) == means2d.size(0) && records.size(1) == stride,
+              "composite_cpu: the forward's packed records expected");
   return {means2d.data_ptr<float>(), conics.data_ptr<float>(), opacities.data_ptr<float>(),
           features.data_ptr<float>(), extents.data_ptr<float>(), offsets.data_ptr<int>(), ids.data_ptr<int>(),
           features.size(1), width, height, tiles_x, tiles_y, records.data_ptr<float>(), stride};
@@ -221,13 +224,13 @@ inline Floats gaussian_alpha(const TileGaussian& t, Floats dx, float dy) {
 
 }  // namespace
 
-// Returns image [H, W, C], final transmittance [H, W], and per pixel the number of list entries
-// up to and including its last contributor [H, W] (int32), which the backward needs.
+// Returns image [H, W, C], final transmittance [H, W], per pixel the number of list entries up to and
+// including its last contributor [H, W] (int32), and the packed records: the backward needs the last three.
 std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities,
                                              torch::Tensor features, torch::Tensor extents,
                                              torch::Tensor tile_offsets, torch::Tensor gaussian_ids, int64_t width,
                                              int64_t height, int64_t tile) {
-  torch::Tensor records;
+  const auto records = torch::empty({means2d.size(0), record_stride(features.size(1))}, features.options());
   const Inputs in = make_inputs(means2d, conics, opacities, features, extents, tile_offsets, gaussian_ids, width,
                                 height, tile, records);
   const int64_t C = in.channels, N = means2d.size(0), tiles = in.tiles_x * in.tiles_y;
@@ -300,7 +303,7 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
       }
     }
   }
-  return {image, final_T, last};
+  return {image, final_T, last, records};
 }
 
 // Gradients of a loss with respect to means2d [N, 2], conics [N, 3], opacities [N] and features [N, C],
@@ -308,9 +311,8 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
 std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities,
                                               torch::Tensor features, torch::Tensor extents,
                                               torch::Tensor tile_offsets, torch::Tensor gaussian_ids,
-                                              torch::Tensor final_T, torch::Tensor last, torch::Tensor grad_image,
-                                              int64_t width, int64_t height, int64_t tile) {
-  torch::Tensor records;
+                                              torch::Tensor final_T, torch::Tensor last, torch::Tensor records,
+                                              torch::Tensor grad_image, int64_t width, int64_t height, int64_t tile) {
   const Inputs in = make_inputs(means2d, conics, opacities, features, extents, tile_offsets, gaussian_ids, width,
                                 height, tile, records);
   grad_image = grad_image.contiguous();
@@ -331,7 +333,7 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
     const int team = omp_get_num_threads();  // may be fewer than asked (nested parallelism)
     float* grads = buffer_ptr + omp_get_thread_num() * N * stride;
     std::fill(grads, grads + N * stride, 0.0f);
-    pack_records(in, N);  // ends with a barrier: the sums are zeroed too
+#pragma omp barrier
     // per-tile state; per-channel arrays are channel-major ([ch * kTilePixels + p])
     alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
