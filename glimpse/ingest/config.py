@@ -59,6 +59,8 @@ class IngestConfig:
     mask_depth_frames: int
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
+    sides_consistent: bool
+    sides_keep_weight: float
     appearance_bins: int
     appearance_update: float
     preview: bool

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import colorsys
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ class PersonTrack:
     boxes: np.ndarray  # [T, 4]
     reidentified: list[tuple[int, float]]
     jumps: list[int]
+    sides_exchanged: list[int] = field(default_factory=list)  # frame ids whose left/right labels were exchanged
 
 
 def person_colour(k: int) -> tuple[int, int, int]:
@@ -83,6 +84,7 @@ def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict
             "gaps": int(person.frames[-1] - person.frames[0] + 1 - len(person.frames)),
             "mean_confidence": float(confidence[confidence > 0].mean()) if (confidence > 0).any() else 0.0,
             "visible_keypoints": float((confidence > 0).mean()),
+            "sides_exchanged": person.sides_exchanged,
             "suspected_switches": [{"frame": f, "why": "re-identified after a gap", "appearance_distance": round(d, 3)}
                                    for f, d in person.reidentified]
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],

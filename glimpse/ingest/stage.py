@@ -39,6 +39,7 @@ from glimpse.ingest.report import (
     report_table,
     tracks_report,
 )
+from glimpse.ingest.sides import exchange_sides, sides_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
@@ -97,14 +98,19 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
     dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(kept)}
     people = []
     for k, track in enumerate(kept):
-        keypoints = smooth_keypoints(np.array(track.frames), np.stack(track.keypoints), config.keypoint_smoothing_frames)
+        keypoints, relative3d = np.stack(track.keypoints), np.stack(track.relative3d)
+        exchange = np.zeros(len(track.frames), bool)
+        if config.sides_consistent:
+            exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
+            keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
+        keypoints = smooth_keypoints(np.array(track.frames), keypoints, config.keypoint_smoothing_frames)
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
         boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
-        relative3d = smooth_keypoints(np.array(track.frames), np.stack(track.relative3d),
-                                      config.keypoint_smoothing_frames)
+        relative3d = smooth_keypoints(np.array(track.frames), relative3d, config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
-                                  list(track.reidentified), list(track.jumps)))
+                                  list(track.reidentified), list(track.jumps),
+                                  [f for f, e in zip(track.frames, exchange) if e]))
     return people, dropped
 
 

@@ -1,0 +1,107 @@
+"""Which side is left, kept consistent along a track.
+
+A pose model can call a person's left their right for a few frames: BlazePose does so for a person who faces the
+camera with their arms at rest (front and back have one outline), takes them for someone seen from behind and
+exchanges every left/right pair, while the frames before and after, arms moving, it gets them right. Smoothing
+and stage 02's fit cannot repair that: a body fitted to such keypoints turns round and back.
+
+Over the whole track at once, a Viterbi pass picks one state per frame, labels as given or every left/right pair
+exchanged, minimising, in torso lengths:
+
+- **continuity**: between consecutive frames of the track, the mean displacement of the left/right joints both
+  frames hold under the two frames' labels (a left shoulder that jumps onto the right one's place costs the
+  jump; a person turning round moves continuously and costs the same either way), and
+- **trust in the model**: every exchanged frame costs ``keep_weight``, so a run the model labels one way is
+  only exchanged when the jumps at its ends cost more, and a track labelled consistently is left as it is.
+
+So the shorter runs between such jumps take the labels of the longer ones around them. Nothing here knows
+which way the person faces: a model that is wrong for most of a track stays wrong.
+
+A frame's exchange applies to the 2D keypoints and to the model's metric 3D landmarks; in 3D the depth is also
+mirrored about the hips when the exchanged skeleton would otherwise be a mirror image of a body (its nose on
+the side its chest's normal points away from).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# COCO-17 left/right pairs: eyes, ears, shoulders, elbows, wrists, hips, knees, ankles
+COCO17_SIDE_PAIRS = ((1, 2), (3, 4), (5, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16))
+COCO17_NOSE = 0
+SHOULDERS, HIPS = (5, 6), (11, 12)
+COCO17_EXCHANGE = np.arange(17)
+for _left, _right in COCO17_SIDE_PAIRS:
+    COCO17_EXCHANGE[_left], COCO17_EXCHANGE[_right] = _right, _left
+
+
+def torso_lengths(keypoints: np.ndarray) -> np.ndarray:
+    """[T, 17, 3] COCO-17 keypoints (x, y, confidence; 0 = missing) -> [T] pixels from the mid hip to the mid
+    shoulder, NaN where a shoulder or a hip is missing."""
+    complete = (keypoints[:, list(SHOULDERS + HIPS), 2] > 0).all(1)
+    up = keypoints[:, list(SHOULDERS), :2].mean(1) - keypoints[:, list(HIPS), :2].mean(1)
+    return np.where(complete, np.linalg.norm(up, axis=1), np.nan)
+
+
+def side_displacements(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Mean pixel displacement from [17, 3] frame ``a`` to frame ``b`` of the left/right joints both hold, with
+    b's labels kept and exchanged (summed over a pair's two joints, averaged over the pairs); (0, 0) when they
+    share no pair."""
+    kept, exchanged, count = 0.0, 0.0, 0
+    for left, right in COCO17_SIDE_PAIRS:
+        if min(a[left, 2], a[right, 2], b[left, 2], b[right, 2]) <= 0:
+            continue
+        kept += np.linalg.norm(a[left, :2] - b[left, :2]) + np.linalg.norm(a[right, :2] - b[right, :2])
+        exchanged += np.linalg.norm(a[left, :2] - b[right, :2]) + np.linalg.norm(a[right, :2] - b[left, :2])
+        count += 1
+    return (kept / count, exchanged / count) if count else (0.0, 0.0)
+
+
+def sides_to_exchange(keypoints: np.ndarray, keep_weight: float) -> np.ndarray:
+    """[T, 17, 3] one track's COCO-17 keypoints in frame order -> [T] bool: the frames whose left/right pairs
+    are to be exchanged (module docstring; ``keep_weight`` in torso lengths per exchanged frame)."""
+    count = len(keypoints)
+    if count == 0:
+        return np.zeros(0, bool)
+    torso = torso_lengths(keypoints)
+    scale = np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
+    unary = np.array([0.0, keep_weight])  # state 0: labels kept; 1: exchanged
+    cost = unary.copy()
+    back = np.zeros((count, 2), int)
+    for t in range(1, count):
+        kept, exchanged = side_displacements(keypoints[t - 1], keypoints[t])
+        jump = np.array([[kept, exchanged], [exchanged, kept]]) / max(scale[t - 1], scale[t], 1e-6)
+        total = cost[:, None] + jump  # [previous state, this state]
+        back[t] = np.argmin(total, axis=0)
+        cost = total[back[t], [0, 1]] + unary
+    states = np.zeros(count, int)
+    states[-1] = int(np.argmin(cost))
+    for t in range(count - 1, 0, -1):
+        states[t - 1] = back[t, states[t]]
+    return states.astype(bool)
+
+
+def exchange_sides(keypoints: np.ndarray, relative3d: np.ndarray, exchange: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of [T, 17, 3] keypoints and [T, 17, 4] relative3d (metres from the mid hip, image axes: x right,
+    y down, z away from the camera; then a confidence) with the left/right pairs exchanged in the frames
+    ``exchange`` [T] bool; there the 3D depth is mirrored too where the exchange made the skeleton a mirror
+    image of a body (:func:`mirrored_3d`)."""
+    keypoints, relative3d = keypoints.copy(), relative3d.copy()
+    keypoints[exchange] = keypoints[exchange][:, COCO17_EXCHANGE]
+    relative3d[exchange] = relative3d[exchange][:, COCO17_EXCHANGE]
+    flip = exchange & mirrored_3d(relative3d)
+    relative3d[flip, :, 2] = -relative3d[flip, :, 2]
+    return keypoints, relative3d
+
+
+def mirrored_3d(relative3d: np.ndarray) -> np.ndarray:
+    """[T, 17, 4] -> [T] bool: skeletons whose nose lies behind the chest's normal ((left - right) x up, the way a
+    body with these labels faces), mirror images of a body; False where a shoulder, a hip or the nose is missing."""
+    points, found = relative3d[..., :3], relative3d[..., 3] > 0
+    complete = found[:, list(SHOULDERS + HIPS) + [COCO17_NOSE]].all(1)
+    shoulders = points[:, list(SHOULDERS)].mean(1)
+    up = shoulders - points[:, list(HIPS)].mean(1)
+    across = sum(points[:, left] - points[:, right] for left, right in (SHOULDERS, HIPS))
+    normal = np.cross(across, up)
+    return complete & (np.einsum("ti,ti->t", normal, points[:, COCO17_NOSE] - shoulders) < 0)
