@@ -90,8 +90,8 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
 def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames whose box is usually (median over their frames) at
     least ``track_min_height`` of the frame's height, named p0, p1, ... in order of first appearance, their
-    keypoints smoothed over time and, with their boxes, in scene pixels; and how many tracks were dropped, by
-    reason."""
+    keypoints' left and right made consistent along the track (glimpse.ingest.sides), smoothed over time and,
+    with their boxes, in scene pixels; and how many tracks were dropped, by reason."""
     long_enough = [t for t in tracks if len(t.frames) >= config.track_min_frames]
     kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
                   key=lambda t: (t.frames[0], t.index))
