@@ -146,6 +146,8 @@ def test_ingest_writes_a_valid_scene_with_both_people(demo_video, ingested) -> N
         assert (keypoints.keypoints[..., :2][confidence == 0] == 0).all()  # missing joints are not invented
     on_disk = json.loads((scene_dir / REPORT_FILE).read_text())
     assert on_disk["people"].keys() == report["people"].keys() and on_disk["frames"] == len(truth.frame_ids)
+    for person in on_disk["people"].values():  # frames whose left/right labels were exchanged (glimpse.ingest.sides)
+        assert all(person["first_frame"] <= f <= person["last_frame"] for f in person["sides_exchanged"])
     preview = read_mp4(scene_dir / PREVIEW_FILE)
     assert preview.shape[0] == len(truth.frame_ids)
 
