@@ -332,8 +332,7 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
   {
     const int team = omp_get_num_threads();  // may be fewer than asked (nested parallelism)
     float* grads = buffer_ptr + omp_get_thread_num() * N * stride;
-    std::fill(grads, grads + N * stride, 0.0f);
-#pragma omp barrier
+    std::fill(grads, grads + N * stride, 0.0f);  // only this thread writes its sums until the tiles' loop ends
     // per-tile state; per-channel arrays are channel-major ([ch * kTilePixels + p])
     alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
