@@ -9,12 +9,13 @@ import torch
 
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
+from glimpse.body.model_file import JOINT_NAMES
 from glimpse.body.motion import BUILTIN_MOTIONS, SMPL_BODY_JOINTS, builtin_motion
 from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import joint_errors
+from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitSchedule, choose_turns, fit_track, initial_state_2d, initial_state_3d
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
@@ -192,10 +193,10 @@ def _posed_keypoints(body: KeypointBody, params: BodyParams):
                     torch.tensor(params.scale, dtype=F64))
 
 
-def _fit(model, config, prior, track, initial):
+def _fit(model, config, prior, track, initial, full_iterations: int = 60):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
-    schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal),
+    schedule = FitSchedule(config.global_iterations, full_iterations, tuple(config.pose_prior_anneal),
                            tuple(config.robust_scale_anneal), False)
     return fit_track(energy, initial, schedule, "person test")
 
@@ -220,6 +221,29 @@ def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):
     errors = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))
     assert errors["mpjpe_m"] < 0.02, errors
     assert [s["stage"] for s in outcome.stages] == ["global", "full_1", "full_2", "full_3"]
+
+
+def test_a_crouch_fitted_to_3d_keypoints_keeps_its_legs(model, config, prior):
+    """A person who crouches (knees bent to 120 degrees, which the default walking-like prior never shows), 100
+    frames at 33 fps, fitted to exact 3D keypoints with the stage's schedule. With the 2D fits' robust scale
+    (robust_scale_3d_m = robust_scale_m = 0.1 m) the ankles, far from where the prior starts them, hardly pull
+    and the fit stops with them 5.4 cm off on average (26 cm at worst); 3D keypoints get a wider one."""
+    frames, fps = 100, 100 / 3
+    motion = builtin_motion("crouch", frames, fps=fps)
+    truth = BodyParams(np.arange(frames), np.linspace(-1.0, 1.0, 10), motion.global_orient, motion.body_pose,
+                       motion.transl + [0.0, 0.0, 3.0], 1.0, "free", np.zeros(frames, bool))
+    knee = 3 * SMPL_BODY_JOINTS.index("left_knee")
+    assert np.degrees(truth.body_pose[:, knee]).max() > 110.0  # deep enough to test the point
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    track = Track(torch.arange(frames), torch.arange(frames, dtype=F64) / fps, _posed_keypoints(body, truth).keypoints,
+                  torch.ones(frames, 17, dtype=F64))
+    outcome = _fit(model, config, prior, track, initial_state_3d(body, track, prior.mean, False),
+                   config.full_iterations)
+    fitted = _as_params(outcome, truth.frame_ids)
+    ankles = [JOINT_NAMES.index(name) for name in ("left_ankle", "right_ankle")]
+    ours = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl)[:, ankles]
+    true = body_joints(model, truth.betas, truth.global_orient, truth.body_pose, truth.transl)[:, ankles]
+    assert np.linalg.norm(ours - true, axis=-1).mean() < 0.025
 
 
 def test_fit_to_clean_2d_keypoints_recovers_the_body_up_to_depth(model, config, prior):

@@ -10,6 +10,7 @@ from typing import Literal
 class FitWeights:
     keypoint_noise_m: float
     robust_scale_m: float
+    robust_scale_3d_m: float
     pose_prior: float
     joint_limits: float
     shape_prior: float

@@ -5,7 +5,8 @@
 - data: sum over confident keypoints of ``c * (rho^2 / sigma^2) * r^2 / (r^2 + rho^2)``, a Geman-McClure
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
   residual in metres at the person: the 3D distance, or the pixel distance times depth / focal length
-  (so 2D and 3D fits share sigma and rho, and a far person weighs as much as a near one).
+  (so 2D and 3D fits share sigma, and a far person weighs as much as a near one). ``rho`` is wider for 3D
+  keypoints (given ones rarely have outliers; a narrow one lets the pose prior win over a deep crouch).
 - metric 3D (2D tracks that carry it: keypoints2d.npz's ``relative3d``, a monocular 3D pose model's output):
   the same robust square on the distance between each keypoint relative to the mid hip, turned into the
   camera's axes and measured in metres of body, and the model's metric point, with its own noise and robust
@@ -213,7 +214,8 @@ class FitEnergy:
         """[T] the keypoints' robust data energy of posed keypoints [T, K, 3]."""
         w = self.weights
         residual = keypoint_residual_m(keypoints, self.track, self.depth_ref)
-        return data_energy(residual, self.track.weight, w.keypoint_noise_m, w.robust_scale_m * self.robust_scale_factor)
+        robust_m = w.robust_scale_m if self.track.is_2d else w.robust_scale_3d_m
+        return data_energy(residual, self.track.weight, w.keypoint_noise_m, robust_m * self.robust_scale_factor)
 
     def relative3d_per_frame(self, state: FitState, keypoints: Tensor) -> Tensor | None:
         """[T] the metric 3D term of posed keypoints [T, K, 3], or None when the track has no metric keypoints
