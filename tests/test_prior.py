@@ -262,7 +262,8 @@ def test_unseen_gaussians_are_pulled_to_the_colour_seen_on_the_body_and_seen_one
     with torch.no_grad():  # the camera saw a red front; the back stays grey
         person.model.sh_dc[torch.as_tensor(seen), 0] = rgb_to_sh_dc(red)
     terms = prior.losses(1, [person])
-    assert set(terms) == {"loss_prior_colour", "loss_prior_surface", "loss_prior_needle", "loss_prior_silhouette"}
+    assert set(terms) == {"loss_prior_colour", "loss_prior_seen_colour", "loss_prior_surface", "loss_prior_needle",
+                          "loss_prior_silhouette"}
     terms["loss_prior_colour"].backward()
     grad = person.model.sh_dc.grad[:, 0].norm(dim=1)
     assert grad[torch.as_tensor(seen)].abs().max() == 0 and (grad[torch.as_tensor(~seen)] > 0).float().mean() > 0.9
@@ -281,6 +282,24 @@ def test_surfaces_seen_only_edge_on_are_pulled_to_the_completed_colour_too(body_
     edge_on = state.seen[vertex] & ~state.colour_source[vertex]
     assert edge_on.sum() > 50 and (grad[edge_on] > 0).float().mean() > 0.9
     assert grad[state.colour_source[vertex]].abs().max() == 0  # what lends the colour is left alone
+
+
+def test_seen_colour_evens_out_speckles_among_what_was_seen(body_model):
+    """A red front with a few green Gaussians (background caught by a person seen small): the completed colour
+    of a speckle's vertex leans to its red neighbours, and seen_colour pulls the speckle that way; at 0 there is no
+    such term."""
+    off, off_person, _ = _prior_and_person(body_model, replace(SURFACE, seen_colour=0.0))
+    assert "loss_prior_seen_colour" not in off.losses(1, [off_person])
+    prior, person, _ = _prior_and_person(body_model)
+    state, vertex = prior.people["p0"], prior._nearest(person)
+    source = torch.nonzero(state.colour_source[vertex]).squeeze(1)
+    speckles = source[::7]
+    with torch.no_grad():
+        person.model.sh_dc[source, 0] = rgb_to_sh_dc(torch.tensor([0.9, 0.1, 0.1]))
+        person.model.sh_dc[speckles, 0] = rgb_to_sh_dc(torch.tensor([0.1, 0.9, 0.1]))
+    prior.losses(1, [person])["loss_prior_seen_colour"].backward()
+    step = -person.model.sh_dc.grad[speckles, 0]  # the descent direction, in SH DC (a positive multiple of RGB)
+    assert len(speckles) > 100 and (step[:, 0] > 0).float().mean() > 0.95 and (step[:, 1] < 0).float().mean() > 0.95
 
 
 def test_the_prior_pulls_stray_unseen_gaussians_back_and_flattens_needles(body_model):

@@ -34,6 +34,7 @@ class SurfacePriorConfig:
     grazing_colour: bool
     colour: float
     view_dependent: float
+    seen_colour: float
     surface: float
     surface_margin_m: float
     needle: float

@@ -15,7 +15,9 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
   seen ancestor part, both weighted by opacity (glimpse.prior.complete); with ``garments``, on the
   torso, arms and legs, towards skin or the zone's garment instead (glimpse.prior.garments). With
   ``grazing_colour``, the Gaussians of vertices seen only beyond ``colour_max_angle_deg`` are pulled
-  to the completed colour too.
+  to the completed colour too. ``seen_colour`` pulls every other Gaussian towards its vertex's colour
+  (its own opacity-weighted mean, where the vertex lends one): colour variation finer than a vertex,
+  which a person seen small cannot show the input, is evened out.
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
@@ -181,29 +183,35 @@ class SurfacePrior(UnseenPrior):
             coloured_at = self.people[person.pid].coloured_at
             if coloured_at == 0 or step - coloured_at >= self.scaled(config.refresh_every):
                 self._refresh_colours(person, step)
-        terms: dict[str, list[Tensor]] = {"colour": [], "surface": [], "needle": []}
+        terms: dict[str, list[Tensor]] = {"colour": [], "seen_colour": [], "surface": [], "needle": []}
         for person in people:
-            colour, surface = self._unseen_terms(person)
+            colour, seen_colour, surface = self._unseen_terms(person)
             terms["colour"].append(colour)
+            terms["seen_colour"].append(seen_colour)
             terms["surface"].append(surface)
             terms["needle"].append(self._needle_term(person))
-        weights = {"colour": config.colour, "surface": config.surface, "needle": config.needle}
+        weights = {"colour": config.colour, "seen_colour": config.seen_colour, "surface": config.surface,
+                   "needle": config.needle}
         out = {f"loss_prior_{name}": weights[name] * torch.stack(values).sum()
                for name, values in terms.items() if weights[name] > 0}
         if config.silhouette_fill > 0 or config.silhouette_trim > 0:
             out["loss_prior_silhouette"] = self._silhouette_term(step, people[step % len(people)])
         return out
 
-    def _unseen_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor]:
-        """(colour term, surface term) of the person's unseen Gaussians (zero when every one was seen); with
-        ``grazing_colour``, the colour term also covers the Gaussians of vertices seen only at grazing angles
-        (they lend no colour either: their own came from the edge of a silhouette)."""
+    def _unseen_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor, Tensor]:
+        """(colour term, seen-colour term, surface term): the colour and surface terms of the person's unseen
+        Gaussians (zero when every one was seen); with ``grazing_colour``, the colour term also covers the
+        Gaussians of vertices seen only at grazing angles (they lend no colour either: their own came from the
+        edge of a silhouette); the seen-colour term covers the others."""
         state, model = self.people[person.pid], person.model
         nearest = self._nearest(person)
         unseen = ~state.seen[nearest]
         pulled = ~state.colour_source[nearest] if self.config.grazing_colour else unseen
         zero = model.means.sum() * 0.0
-        colour = surface = zero
+        colour = seen_colour = surface = zero
+        if self.config.seen_colour > 0 and not pulled.all():
+            rgb = sh_dc_to_rgb(model.sh_dc[~pulled, 0])
+            seen_colour = (rgb - state.vertex_colours[nearest[~pulled]]).square().sum(1).mean()
         if pulled.any():
             rgb = sh_dc_to_rgb(model.sh_dc[pulled, 0])
             colour = (rgb - state.vertex_colours[nearest[pulled]]).square().sum(1).mean()
@@ -213,7 +221,7 @@ class SurfacePrior(UnseenPrior):
             distance = (model.means[unseen] - state.vertices[nearest[unseen]]).norm(dim=1)
             margin = self.config.surface_margin_m
             surface = ((distance - margin).clamp(min=0.0) / margin).square().mean()
-        return colour, surface
+        return colour, seen_colour, surface
 
     def _needle_term(self, person: PersonGaussians) -> Tensor:
         scales = person.model.scales().sort(dim=1).values  # ascending
