@@ -209,12 +209,14 @@ class SurfacePrior(UnseenPrior):
         pulled = ~state.colour_source[nearest] if self.config.grazing_colour else unseen
         zero = model.means.sum() * 0.0
         colour = seen_colour = surface = zero
-        if self.config.seen_colour > 0 and not pulled.all():
-            rgb = sh_dc_to_rgb(model.sh_dc[~pulled, 0])
-            seen_colour = (rgb - state.vertex_colours[nearest[~pulled]]).square().sum(1).mean()
-        if pulled.any():
-            rgb = sh_dc_to_rgb(model.sh_dc[pulled, 0])
-            colour = (rgb - state.vertex_colours[nearest[pulled]]).square().sum(1).mean()
+        pulled_count = int(pulled.sum())
+        if pulled_count or self.config.seen_colour > 0:  # every Gaussian's distance at once: cheaper than two subsets
+            error = (sh_dc_to_rgb(model.sh_dc[:, 0]) - state.vertex_colours[nearest]).square().sum(1)
+            weight = pulled.to(error.dtype)
+            if self.config.seen_colour > 0 and pulled_count < len(pulled):
+                seen_colour = (error * (1.0 - weight)).sum() / (len(pulled) - pulled_count)
+        if pulled_count:
+            colour = (error * weight).sum() / pulled_count
             if model.sh_rest.shape[1] > 0 and self.config.view_dependent > 0:
                 colour = colour + self.config.view_dependent * model.sh_rest[pulled].square().sum((1, 2)).mean()
         if unseen.any():
