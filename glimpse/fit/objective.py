@@ -6,7 +6,8 @@
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
   residual in metres at the person: the 3D distance, or the pixel distance times depth / focal length
   (so 2D and 3D fits share sigma, and a far person weighs as much as a near one). ``rho`` is wider for 3D
-  keypoints (given ones rarely have outliers; a narrow one lets the pose prior win over a deep crouch).
+  keypoints: given ones rarely have outliers, and with a narrow one a deep crouch's ankles, far from where
+  the prior holds them early on, pull too weakly for the fit to reach them in its iterations.
 - metric 3D (2D tracks that carry it: keypoints2d.npz's ``relative3d``, a monocular 3D pose model's output):
   the same robust square on the distance between each keypoint relative to the mid hip, turned into the
   camera's axes and measured in metres of body, and the model's metric point, with its own noise and robust

@@ -2,7 +2,7 @@
 
 What the input views saw of each person is known per body vertex (glimpse.humans.visibility); each
 canonical Gaussian belongs to its nearest Da-pose body vertex, and is *unseen* when that vertex was
-seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every iteration from
+seen in fewer than ``min_seen_frames`` input frames. Five weighted terms, every iteration from
 ``start_at`` on, for the people of the view:
 
 - ``loss_prior_colour``: each unseen Gaussian's base colour (SH DC) against a completed colour of its
@@ -15,9 +15,10 @@ seen in fewer than ``min_seen_frames`` input frames. Four weighted terms, every 
   seen ancestor part, both weighted by opacity (glimpse.prior.complete); with ``garments``, on the
   torso, arms and legs, towards skin or the zone's garment instead (glimpse.prior.garments). With
   ``grazing_colour``, the Gaussians of vertices seen only beyond ``colour_max_angle_deg`` are pulled
-  to the completed colour too. ``seen_colour`` pulls every other Gaussian towards its vertex's colour
-  (its own opacity-weighted mean, where the vertex lends one): colour variation finer than a vertex,
-  which a person seen small cannot show the input, is evened out.
+  to the completed colour too. ``loss_prior_seen_colour`` (weight ``seen_colour``) pulls every other
+  Gaussian towards its vertex's completed colour (there, its own opacity-weighted mean held against its
+  neighbours'): colour variation finer than that, which a person seen small cannot show the input, is
+  evened out.
 - ``loss_prior_surface``: unseen Gaussians further than ``surface_margin_m`` from their vertex, squared
   excess over the margin squared; nothing else holds them on the body.
 - ``loss_prior_needle``: every Gaussian whose largest scale exceeds ``needle_ratio`` times its middle
