@@ -7,7 +7,7 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
   noisy-30%: the same with further keypoints dropped at random, 30% dropped in all
 Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
-the fixtures with another seed; `--set KEY=VALUE` changes 02_smpl_fit parameters, to compare settings.
+the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings.
 
 People are fitted together (02_smpl_fit.ground: one floor for everyone with a static camera;
 `--ground off` fits each alone); a second table per size gives, per scene, the 2D fits' error
@@ -33,14 +33,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
-from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
+from glimpse.config import command_params, config_from_mapping  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
 from glimpse.fit.floor_fit import place_on_common_floor  # noqa: E402
@@ -84,28 +83,16 @@ def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np
             np.savez(person / name, **data)
 
 
-def _fit_section(ground_mode: str, overrides: tuple[str, ...] = ()) -> dict:
-    """pipeline.yaml's 02_smpl_fit with the ground mode and ``overrides`` ("weights.pose_prior=0.5": dotted keys
-    inside the section, YAML values) applied."""
-    raw = load_pipeline_yaml()["02_smpl_fit"]
-    raw = {**raw, "ground": {**raw["ground"], "mode": ground_mode}}
-    for item in overrides:
-        key, _, value = item.partition("=")
-        *parents, leaf = key.split(".")
-        section = raw
-        for name in parents:
-            section[name] = dict(section[name])
-            section = section[name]
-        if leaf not in section:
-            raise SystemExit(f"--set {item}: 02_smpl_fit has no {key}")
-        section[leaf] = yaml.safe_load(value)
-    return raw
+def _fit_section(ground_mode: str, params: str = "") -> dict:
+    """pipeline.yaml's 02_smpl_fit with ``params`` (as make's PARAMS) applied and the ground mode set."""
+    raw = command_params(params)["02_smpl_fit"]
+    return {**raw, "ground": {**raw["ground"], "mode": ground_mode}}
 
 
 def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
              conditions: tuple[str, ...] = CONDITIONS, ground_mode: str = "auto", seed: int = SEED,
-             overrides: tuple[str, ...] = ()) -> list[dict]:
-    raw = _fit_section(ground_mode, overrides)
+             params: str = "") -> list[dict]:
+    raw = _fit_section(ground_mode, params)
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
@@ -156,8 +143,8 @@ def _silhouettes(model: BodyModel, bodies: list, camera, width: int, height: int
     return np.where(owner >= 0, np.asarray(owners + [-1])[owner], -1)
 
 
-def evaluate_unseen(size: str, root: Path, ground_mode: str = "auto") -> list[dict]:
-    raw = _fit_section(ground_mode)
+def evaluate_unseen(size: str, root: Path, ground_mode: str = "auto", params: str = "") -> list[dict]:
+    raw = _fit_section(ground_mode, params)
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
     for scenario in UNSEEN_SCENARIOS:
@@ -258,8 +245,8 @@ def main() -> int:
                         help="02_smpl_fit.ground.mode for every fit (off: each person alone, as before the floor)")
     parser.add_argument("--seed", type=int, default=SEED,
                         help="the fixture scenes' seed (the defaults were tuned on 0)")
-    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="02_smpl_fit parameters for the fixture fits, e.g. weights.robust_scale_3d_m=0.1")
+    parser.add_argument("--params", default="",
+                        help="parameter overrides, as make's PARAMS: 02_smpl_fit.weights.robust_scale_3d_m=0.1")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
     cache = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "bench_fit"
@@ -267,11 +254,11 @@ def main() -> int:
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         for size in ("full",) if args.only_full else ("small", "full") if args.full else ("small",):
             rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions), args.ground, args.seed,
-                            tuple(args.set))
+                            args.params)
             print_table(size, rows, tuple(args.conditions))
             print_placement_table(size, rows, tuple(args.conditions))
             if not args.no_unseen:
-                print_unseen_table(size, evaluate_unseen(size, Path(tmp), args.ground))
+                print_unseen_table(size, evaluate_unseen(size, Path(tmp), args.ground, args.params))
             if args.per_person:
                 for r in rows:
                     print(f"{r['scenario']} {r['person']} {r['mode']} {r['condition']}: "

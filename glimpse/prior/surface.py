@@ -186,7 +186,7 @@ class SurfacePrior(UnseenPrior):
                 self._refresh_colours(person, step)
         terms: dict[str, list[Tensor]] = {"colour": [], "seen_colour": [], "surface": [], "needle": []}
         for person in people:
-            colour, seen_colour, surface = self._unseen_terms(person)
+            colour, seen_colour, surface = self._colour_and_surface_terms(person)
             terms["colour"].append(colour)
             terms["seen_colour"].append(seen_colour)
             terms["surface"].append(surface)
@@ -199,7 +199,7 @@ class SurfacePrior(UnseenPrior):
             out["loss_prior_silhouette"] = self._silhouette_term(step, people[step % len(people)])
         return out
 
-    def _unseen_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor, Tensor]:
+    def _colour_and_surface_terms(self, person: PersonGaussians) -> tuple[Tensor, Tensor, Tensor]:
         """(colour term, seen-colour term, surface term): the colour and surface terms of the person's unseen
         Gaussians (zero when every one was seen); with ``grazing_colour``, the colour term also covers the
         Gaussians of vertices seen only at grazing angles (they lend no colour either: their own came from the
@@ -210,12 +210,12 @@ class SurfacePrior(UnseenPrior):
         pulled = ~state.colour_source[nearest] if self.config.grazing_colour else unseen
         zero = model.means.sum() * 0.0
         colour = seen_colour = surface = zero
+        # every Gaussian's colour error in one pass, the two terms' Gaussians as 0/1 weights: cheaper than subsets
+        error = (sh_dc_to_rgb(model.sh_dc[:, 0]) - state.vertex_colours[nearest]).square().sum(1)
+        weight = pulled.to(error.dtype)
         pulled_count = int(pulled.sum())
-        if pulled_count or self.config.seen_colour > 0:  # every Gaussian's distance at once: cheaper than two subsets
-            error = (sh_dc_to_rgb(model.sh_dc[:, 0]) - state.vertex_colours[nearest]).square().sum(1)
-            weight = pulled.to(error.dtype)
-            if self.config.seen_colour > 0 and pulled_count < len(pulled):
-                seen_colour = (error * (1.0 - weight)).sum() / (len(pulled) - pulled_count)
+        if self.config.seen_colour > 0 and pulled_count < len(pulled):
+            seen_colour = (error * (1.0 - weight)).sum() / (len(pulled) - pulled_count)
         if pulled_count:
             colour = (error * weight).sum() / pulled_count
             if model.sh_rest.shape[1] > 0 and self.config.view_dependent > 0:
