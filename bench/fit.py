@@ -9,10 +9,10 @@ Prints one Markdown table per size: mean per-joint error as fitted and after ali
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
 the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings.
 
-People are fitted together (02_smpl_fit.ground: one floor for everyone with a static camera;
-`--ground off` fits each alone); a second table per size gives, per scene, the 2D fits' error
-with no alignment, the error of pelvis-to-pelvis distances, how often the depth order of two
-people agrees with the truth, and fitting seconds per person per 100 frames.
+People are fitted together (02_smpl_fit.ground: one floor for everyone with a static camera,
+planted feet with a moving one; `--ground off` fits each alone); a second table per size gives, per
+scene, the 2D fits' error with no alignment, the error of pelvis-to-pelvis distances, how often the
+depth order of two people agrees with the truth, and fitting seconds per person per 100 frames.
 
 Then "scenes not seen": `demo` and `crowd` with another seed (other looks and body shapes),
 2D keypoints only (mode auto), each person's pose prior fitted to the built-in motions other
@@ -57,6 +57,13 @@ TOTAL_DROP = 0.3
 CONDITIONS = ("clean", "noisy", "noisy-30%")
 UNSEEN_SCENARIOS = ("demo", "crowd")
 UNSEEN_SEED = 7
+
+
+def _floor_label(floor: dict) -> str:
+    """The placement table's floor column: yes (one floor), planted feet (a moving camera) or no."""
+    if not floor["applied"]:
+        return "no"
+    return "planted feet" if floor.get("planted_feet_only") else "yes"
 
 
 def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np.random.Generator) -> None:
@@ -120,7 +127,7 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
                     errors = joint_errors(model, fit.params, truths[fit.pid])
                     rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
                                  "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
-                                 "floor": floor["applied"], **placement, **errors})
+                                 "floor": _floor_label(floor), **placement, **errors})
     return rows
 
 
@@ -225,7 +232,7 @@ def print_placement_table(size: str, rows: list[dict], conditions: tuple[str, ..
             worst = max(sel, key=lambda r: r["mpjpe_m"])
             distance = sel[0]["pelvis_distance_error_m"]
             order = sel[0]["depth_order_agreement"]
-            print(f"| {scenario} | {condition} | {len(sel)} | {'yes' if sel[0]['floor'] else 'no'} | "
+            print(f"| {scenario} | {condition} | {len(sel)} | {sel[0]['floor']} | "
                   f"{100 * np.mean([r['mpjpe_m'] for r in sel]):.1f} | "
                   f"{100 * np.mean([r['sequence_aligned_m'] for r in sel]):.1f} | "
                   f"{100 * worst['mpjpe_m']:.1f} ({worst['person']}) | "

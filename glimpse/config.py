@@ -210,6 +210,16 @@ def _check_value(value: Any, tp: Any) -> bool:
 
 T = typing.TypeVar("T")
 EXPONENT_FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+")
+YAML11_BOOLEAN_WORDS = {True: ("on", "yes", "true"), False: ("off", "no", "false")}  # what YAML 1.1 reads as booleans
+
+
+def _yaml11_word(value: Any, tp: Any) -> Any:
+    """A choice field's word that YAML 1.1 turned into a boolean (``mode: off`` or ``PARAMS=x.mode=off`` reads
+    False), given back as the field's choice; any other value unchanged."""
+    if not isinstance(value, bool) or typing.get_origin(tp) is not Literal:
+        return value
+    words = [a for a in typing.get_args(tp) if isinstance(a, str) and a.lower() in YAML11_BOOLEAN_WORDS[value]]
+    return words[0] if len(words) == 1 else value
 
 
 def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) -> T:
@@ -218,7 +228,8 @@ def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) ->
     Unknown keys, missing keys and values of the wrong type are ConfigErrors that
     name ``where`` (e.g. ``pipeline.yaml 01_sfm``) and the known keys. Fields that
     are themselves config dataclasses are built recursively. Float fields accept
-    integers (converted) and numbers in exponent form that YAML left as strings ("5e-5").
+    integers (converted) and numbers in exponent form that YAML left as strings ("5e-5"); choice fields
+    take back the words YAML 1.1 reads as booleans (``off``, ``no``, ``on``, ``yes``).
     """
     if not isinstance(mapping, Mapping):
         raise ConfigError(f"{where}: must be a mapping, found {type(mapping).__name__}")
@@ -238,6 +249,7 @@ def config_from_mapping(cls: type[T], mapping: Mapping[str, Any], where: str) ->
             continue
         if tp is float and isinstance(value, str) and EXPONENT_FLOAT.fullmatch(value.strip()):
             value = float(value)  # "5e-5": YAML 1.1 reads an exponent without a decimal point as a string
+        value = _yaml11_word(value, tp)
         if not _check_value(value, tp):
             raise ConfigError(f"{where}.{name}: expected {_type_name(tp)}, found {value!r}")
         values[name] = float(value) if tp is float else value

@@ -94,6 +94,12 @@ class _Example:
     on: bool
 
 
+@dataclasses.dataclass(frozen=True)
+class _Switch:
+    switch: Literal["auto", "off"]
+    on: bool
+
+
 def test_typed_config_is_strict():
     good = {"mode": "a", "rate": 1, "count": 2, "limit": None, "on": True}
     cfg = config_from_mapping(_Example, good, "x")
@@ -104,6 +110,11 @@ def test_typed_config_is_strict():
     (_, value), = parse_cli_params("x.rate=5e-5")  # YAML 1.1 leaves an exponent without a point a string
     assert value == "5e-5" and config_from_mapping(_Example, {**good, "rate": value}, "x").rate == 5e-5
     assert config_from_mapping(_Example, {**good, "rate": "-1.5E+3"}, "x").rate == -1500.0
+    (_, off), = parse_cli_params("x.switch=off")  # YAML 1.1 reads off / on / no / yes as booleans
+    assert off is False and config_from_mapping(_Switch, {"switch": off, "on": off}, "x") == _Switch("off", False)
+    assert config_from_mapping(_Switch, {"switch": "auto", "on": True}, "x").switch == "auto"
+    with pytest.raises(ConfigError, match=r"x\.switch: expected 'auto' \| 'off', found True"):
+        config_from_mapping(_Switch, {"switch": True, "on": True}, "x")  # "on" is not one of its words
     with pytest.raises(ConfigError, match=r"x\.count: expected"):
         config_from_mapping(_Example, {**good, "count": "5e2"}, "x")  # only float fields read numbers from text
     with pytest.raises(ConfigError, match="unknown key.*extra.*known keys: count, limit, mode, on, rate"):

@@ -11,7 +11,7 @@ from glimpse.body.model import BodyModel
 from glimpse.body.models import BodyModels
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import body_joints
+from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
                                 placement_factors, plane_weights, speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
@@ -132,22 +132,28 @@ def test_floor_energy_gradient_matches_finite_differences(model):
     soles = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
     g = torch.Generator().manual_seed(2)
     contact = (torch.rand(4, 4, generator=g) > 0.4).to(F64)
-    term = FloorContact(soles, torch.as_tensor(UP), torch.as_tensor(CAMERA), 1.5, contact, 0.02, 0.1)
+    term = FloorContact(soles, contact, 0.02, 0.1, (torch.as_tensor(UP), torch.as_tensor(CAMERA), 1.5))
     points = torch.randn(4, 4, 3, generator=g, dtype=F64) * 0.3 + torch.as_tensor(CAMERA - 1.52 * UP)
     times, ids = torch.arange(4, dtype=F64) / 30.0, torch.arange(4)
     points.requires_grad_(True)
-    term.energy(points, times, ids, 2).backward()
+    one = torch.ones((), dtype=F64)
+    term.energy(points, times, ids, 2, one).backward()
     numeric = torch.zeros_like(points)
     step = 1e-6
     for index in np.ndindex(*points.shape):
         shifted = points.detach().clone()
         shifted[index] += step
-        high = term.energy(shifted, times, ids, 2)
+        high = term.energy(shifted, times, ids, 2, one)
         shifted[index] -= 2 * step
-        numeric[index] = (high - term.energy(shifted, times, ids, 2)) / (2 * step)
+        numeric[index] = (high - term.energy(shifted, times, ids, 2, one)) / (2 * step)
     torch.testing.assert_close(points.grad, numeric, rtol=1e-5, atol=1e-4)
     on_floor = torch.as_tensor(CAMERA - 1.5 * UP).expand(4, 4, 3)
-    assert float(term.energy(on_floor, times, ids, 2)) == pytest.approx(0.0, abs=1e-12)
+    assert float(term.energy(on_floor, times, ids, 2, one)) == pytest.approx(0.0, abs=1e-12)
+    # in SfM units (k world units per metre) the same scene, k times as large, has the same energy
+    k = 3.7
+    larger = FloorContact(soles, contact, 0.02, 0.1, (torch.as_tensor(UP), k * torch.as_tensor(CAMERA), k * 1.5))
+    assert float(larger.energy(k * points.detach(), times, ids, 2, k * one)) == pytest.approx(
+        float(term.energy(points.detach(), times, ids, 2, one)), rel=1e-9)
 
 
 def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, tmp_path):
@@ -175,3 +181,35 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
         ratios.append(np.median(np.linalg.norm(fitted - centre, axis=1) / np.linalg.norm(real - centre, axis=1)))
     # placed right relative to each other (alone, the child is placed about 30% too far: docs/fitting.md)
     assert abs(np.log(ratios[0] / ratios[1])) < 0.05
+
+
+def test_a_moving_cameras_person_is_placed_better_with_its_feet_planted(model, tmp_path):
+    """A moving camera's person, fitted from exact 2D keypoints, cannot be moved along one frame's rays (a
+    common floor does not apply); but its feet held still while they touch the ground, seen from the camera's
+    path, pin where it stands (here 14.0 -> 8.6 cm as fitted; docs/fitting.md)."""
+    scene_dir = make_scene("moving_camera", tmp_path / "moving_camera", "small", seed=2)
+    truth = dict(np.load(scene_dir.with_name(scene_dir.name + ".groundtruth") / "p0_body.npz"))
+    keep_only_2d_keypoints(scene_dir)
+    _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
+    path = scene_dir / "humans" / "p0" / "keypoints2d.npz"
+    data = dict(np.load(path))
+    rows = np.searchsorted(truth["frame_ids"], data["frame_ids"])
+    with torch.no_grad():
+        out = model(torch.as_tensor(truth["betas"])[None], torch.as_tensor(truth["global_orient"][rows]),
+                    torch.as_tensor(truth["body_pose"][rows]), torch.as_tensor(truth["transl"][rows]))
+    exact = keypoint_map(str(data["layout"]), model.data)(out.joints, out.vertices).numpy()
+    pixels = np.stack([cameras[int(f)].project(points)[0] for f, points in zip(data["frame_ids"], exact)])
+    data["keypoints"][..., :2] = np.where(data["keypoints"][..., 2:] > 0, pixels, 0.0)
+    np.savez(path, **data)
+    scene = load_scene(scene_dir)
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    errors = {}
+    for mode in ("off", "auto"):
+        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {**raw["ground"], "mode": mode}},
+                                     "pipeline.yaml 02_smpl_fit")
+        fitter = Fitter(scene, BodyModels(model), cameras, config, "metres")
+        (fit,), floor = fitter.fit_people(list(scene.humans.values()))
+        assert floor["applied"] == floor.get("planted_feet_only", False) == (mode == "auto"), floor
+        errors[mode] = joint_errors(model, fit.params, truth)["mpjpe_m"]
+    assert fit.report["ground"]["contact_sole_points"] > 0
+    assert errors["auto"] < 0.75 * errors["off"], errors

@@ -9,8 +9,11 @@ on one floor (glimpse.fit.ground) and refitted with their feet on it.
    puts its contact plane on the common floor, then refitted with the floor term on
    (glimpse.fit.objective.FloorContact: contacts on the floor, nothing below it, no sliding).
 
-Only for a static camera in a metric frame: moved along its own rays a person still projects
-to the same pixels there (a moving camera's people are placed by parallax instead).
+Steps 2 and 3 only for a static camera in a metric frame: moved along its own rays a person still
+projects to the same pixels there. A moving camera's 2D-fitted people (metric or SfM units) are
+refitted with planted feet only: a sole point that touches the ground does not slide, which, seen
+from the camera's path, pins where the person stands (a floor through their own feet measured
+worse than none: docs/fitting.md).
 """
 
 from __future__ import annotations
@@ -71,18 +74,22 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
     ``models`` gives each person's body model, ``fps`` is the scene's frame rate. Returns the floor report
     (``applied`` false with the reason when the step does not apply)."""
     g = config.ground
-    centres = np.stack([cameras[f].centre for f in sorted(cameras)])
-    reason = _why_not(pending, centres, g)
+    frame_centres = {f: cameras[f].centre for f in sorted(cameras)}
+    centres = np.stack(list(frame_centres.values()))
+    static = _static(centres)
+    reason = _why_not(pending, static, g)
     if reason is not None:
         return {"applied": False, "reason": reason}
-    centre = centres[0]
     soles: dict[int, KeypointBody] = {}  # per distinct body model
     for p in pending:
         model = models[p.person.pid]
         if id(model) not in soles:
             soles[id(model)] = KeypointBody(model, landmark_map("soles", SOLE_LANDMARKS, model.data))
     soles_bodies = [soles[id(models[p.person.pid])] for p in pending]
-    feet = [_feet(p, body, centre, config, fps) for p, body in zip(pending, soles_bodies)]
+    feet = [_feet(p, body, frame_centres, config, fps) for p, body in zip(pending, soles_bodies)]
+    if not static:
+        return _plant_feet(pending, feet, soles_bodies, g)
+    centre = centres[0]
     up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
     if np.linalg.norm(up_hint) <= 0:
         return {"applied": False, "reason": "nobody stands upright in any frame (no up to start the floor from)"}
@@ -118,22 +125,43 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
 
 
-def _why_not(pending: list[PendingFit], centres: np.ndarray, g: GroundConfig) -> str | None:
+def _why_not(pending: list[PendingFit], static: bool, g: GroundConfig) -> str | None:
     """Why the floor step does not apply (None when it does)."""
     movable = [p for p in pending if p.mode == "keypoints2d"]
-    tolerance = STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))
     if g.mode == "off":
         return "02_smpl_fit.ground.mode is off"
     if not movable:
         return "no person is fitted from 2D keypoints"
-    if not np.allclose(centres, centres[0], rtol=0.0, atol=tolerance):
-        return "the camera moves (its people are placed by parallax)"
-    if any(p.schedule.fit_scale for p in movable):
+    if static and any(p.schedule.fit_scale for p in movable):
         return "the frame is not metric (the scale is fitted)"
     return None
 
 
-def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, config: FitConfig, fps: float) -> _Feet:
+def _static(centres: np.ndarray) -> bool:
+    """Whether the cameras' centres [N, 3] (world) agree: a static camera."""
+    tolerance = STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))
+    return bool(np.allclose(centres, centres[0], rtol=0.0, atol=tolerance))
+
+
+def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list[KeypointBody],
+                g: GroundConfig) -> dict:
+    """A moving camera: nobody can be moved along one frame's rays, and a floor through the 2D-fitted people's
+    own feet measured worse than none (docs/fitting.md); each one is refitted with its feet held still while
+    they touch the ground, which, seen from the camera's path, pins where the person stands."""
+    for p, f, soles_body in zip(pending, feet, soles_bodies):
+        p.ground = {"contact_sole_points": int(f.contact.sum())}
+        if p.mode == "keypoints2d":
+            started = time.perf_counter()
+            p.ground["refit"] = _refit(p, f, None, 1.0, soles_body, g)
+            p.seconds += time.perf_counter() - started
+    return {"applied": True, "planted_feet_only": True,
+            "why": "the camera moves: each person fitted from 2D keypoints is refitted with its feet still while they "
+                   "touch the ground (no common floor plane, no placement factors)"}
+
+
+def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.ndarray], config: FitConfig,
+          fps: float) -> _Feet:
+    """The person's sole points, up, standing weights and contacts; ``centres`` the camera centre per frame id."""
     dtype = soles_body.joint_template.dtype
     if pending.params is not None:
         params = pending.params.select(pending.params.frame_ids[~pending.params.interpolated])
@@ -154,18 +182,24 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centre: np.ndarray, con
     up = Rotation.from_rotvec(orient.numpy()).apply([0.0, 1.0, 0.0])
     standing = standing_weights(up, joints[:, HIPS], joints[:, KNEES], config.ground.standing_thigh_deg)
     g = config.ground
-    speed = speed_across_view(soles, times, frame_ids, centre, config.max_interpolated_gap)
+    frame_centres = np.stack([centres[int(f)] for f in frame_ids])
+    speed = speed_across_view(soles, times, frame_ids, frame_centres, config.max_interpolated_gap)
     return _Feet(soles, up, standing, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
 
-def _refit(pending: PendingFit, feet: _Feet, floor: Floor, factor: float, soles_body: KeypointBody,
+def _refit(pending: PendingFit, feet: _Feet, floor: Floor | None, factor: float, soles_body: KeypointBody,
            g: GroundConfig) -> dict:
+    """Refit ``pending`` moved by ``factor`` about the floor's camera centre onto ``floor`` (None: planted feet
+    only, not moved)."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
-    centre = torch.as_tensor(floor.camera_centre, dtype=dtype)
-    state = rescale_about(outcome.state, energy.body, centre, factor, g.shape_ridge)
-    energy.floor = FloorContact(soles_body, torch.as_tensor(floor.normal, dtype=dtype), centre, floor.camera_height,
-                                torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m, g.skate_sigma_m_s)
+    state, plane = outcome.state, None
+    if floor is not None:
+        centre = torch.as_tensor(floor.camera_centre, dtype=dtype)
+        state = rescale_about(state, energy.body, centre, factor, g.shape_ridge)
+        plane = (torch.as_tensor(floor.normal, dtype=dtype), centre, floor.camera_height)
+    energy.floor = FloorContact(soles_body, torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m,
+                                g.skate_sigma_m_s, plane)
     stage = refit_on_floor(energy, state, pending.schedule, g.iterations, f"person {pending.person.pid}")
     energy.floor = None
     outcome.state = state.detached()

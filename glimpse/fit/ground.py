@@ -46,8 +46,10 @@ def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.nda
                       max_gap_frames: int) -> np.ndarray:
     """[T, S] speed of points [T, S, 3] across the camera's view (the component along the viewing ray
     dropped: a 2D fit's depth jitters, its image position does not), from the neighbouring frames at
-    most ``max_gap_frames`` away (one-sided at the ends, inf where a frame has no neighbour)."""
+    most ``max_gap_frames`` away (one-sided at the ends, inf where a frame has no neighbour).
+    ``camera_centre``: [3], or [T, 3] for a moving camera (each frame's centre)."""
     frames = len(points)
+    camera_centre = np.broadcast_to(camera_centre, (frames, 3))
     speed = np.full(points.shape[:2], np.inf)
     for t in range(frames):
         before = t - 1 if t > 0 and frame_ids[t] - frame_ids[t - 1] <= max_gap_frames else t
@@ -55,7 +57,7 @@ def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.nda
         if before == after:
             continue
         velocity = (points[after] - points[before]) / (times_s[after] - times_s[before])
-        ray = points[t] - camera_centre
+        ray = points[t] - camera_centre[t]
         ray = ray / np.linalg.norm(ray, axis=-1, keepdims=True).clip(min=1e-12)
         across = velocity - (velocity * ray).sum(-1, keepdims=True) * ray
         speed[t] = np.linalg.norm(across, axis=-1)

@@ -18,9 +18,10 @@
   fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
   metres of body (world units divided by the person's scale), so in SfM units they tell the scale:
   placed at the wrong depth in every frame of a moving camera, a person would race along an arc.
-- floor (only when stage 02 knows the people's common floor, glimpse.fit.ground): sole points of
-  the contact frames on the floor, ``(height / sigma_floor)^2``; any sole point below it, the
-  same; contact points that slide between consecutive contact frames, ``(speed / sigma_skate)^2``.
+- floor (only in stage 02's floor step, glimpse.fit.floor_fit): sole points of the contact frames
+  on the people's common floor, ``(height / sigma_floor)^2``, and any sole point below it, the same
+  (static camera only); contact points that slide between consecutive contact frames,
+  ``(speed / sigma_skate)^2``. Heights and speeds in metres of body.
 Every term is a sum over frames (not a mean), so the priors weigh less where keypoints are many.
 """
 
@@ -154,26 +155,30 @@ def acceleration_energy(joints: Tensor, times_s: Tensor, frame_ids: Tensor, sigm
 @dataclass(frozen=True)
 class FloorContact:
     """The floor term's data: sole landmarks (``soles``, a KeypointBody of glimpse.fit.ground.SOLE_LANDMARKS),
-    the plane ``normal . (x - camera_centre) = -camera_height`` (normal [3], camera_centre [3], world units),
-    contact [T, S] (1 where a sole point touches the floor), and the noise scales."""
+    contact [T, S] (1 where a sole point touches the floor), the noise scales, and ``plane``: the floor
+    ``normal . (x - camera_centre) = -camera_height`` as (normal [3], camera_centre [3], camera_height), world
+    units; None for planted feet only (a moving camera's people: their feet not sliding while they touch
+    the ground, seen from the camera's path, is what pins where they stand)."""
 
     soles: KeypointBody
-    normal: Tensor
-    camera_centre: Tensor
-    camera_height: float
     contact: Tensor
     sigma_m: float
     skate_sigma_m_s: float
+    plane: tuple[Tensor, Tensor, float] | None
 
-    def energy(self, soles: Tensor, times_s: Tensor, frame_ids: Tensor, max_gap_frames: int) -> Tensor:
-        """soles [T, S, 3] world points (metres: the floor term is used in metric frames only)."""
-        height = height_above_plane(soles, self.normal, self.camera_centre, self.camera_height)  # [T, S]
-        on_floor = (self.contact * height.square()).sum()
-        below = height.clamp(max=0.0).square().sum()
-        energy = (on_floor + below) / self.sigma_m**2
+    def energy(self, soles: Tensor, times_s: Tensor, frame_ids: Tensor, max_gap_frames: int,
+               units_per_metre: Tensor) -> Tensor:
+        """soles [T, S, 3] world points; heights and speeds are judged in metres of body (world units divided
+        by the person's ``units_per_metre``, 1 in a metric frame)."""
+        energy = soles.new_zeros(())
+        if self.plane is not None:
+            height = height_above_plane(soles, *self.plane) / units_per_metre  # [T, S]
+            on_floor = (self.contact * height.square()).sum()
+            below = height.clamp(max=0.0).square().sum()
+            energy = (on_floor + below) / self.sigma_m**2
         if len(times_s) >= 2:
             both = self.contact[1:] * self.contact[:-1] * ((frame_ids[1:] - frame_ids[:-1]) <= max_gap_frames)[:, None]
-            velocity = (soles[1:] - soles[:-1]) / (times_s[1:] - times_s[:-1])[:, None, None]
+            velocity = (soles[1:] - soles[:-1]) / (times_s[1:] - times_s[:-1])[:, None, None] / units_per_metre
             energy = energy + (both * velocity.square().sum(-1)).sum() / self.skate_sigma_m_s**2
         return energy
 
@@ -249,7 +254,7 @@ class FitEnergy:
                 soles = self.floor.soles(state.betas, state.global_orient, state.body_pose, state.transl,
                                          state.log_scale.exp()).keypoints
                 terms["floor"] = self.floor.energy(soles, self.track.times_s, self.track.frame_ids,
-                                                   self.max_gap_frames)
+                                                   self.max_gap_frames, state.log_scale.exp())
         return terms
 
     def __call__(self, state: FitState) -> Tensor:
