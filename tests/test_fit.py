@@ -17,7 +17,8 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import FitSchedule, choose_turns, fit_track, initial_state_2d, initial_state_3d
+from glimpse.fit.keypoint_fit import (FitSchedule, choose_turns, fit_track, initial_state_2d, initial_state_3d,
+                                     motion_stride)
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
 from glimpse.fit.priors import build_pose_prior, joint_limits, mirror_body_pose, motion_poses
 from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
@@ -197,7 +198,7 @@ def _fit(model, config, prior, track, initial, full_iterations: int = 60):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
     schedule = FitSchedule(config.global_iterations, full_iterations, tuple(config.pose_prior_anneal),
-                           tuple(config.robust_scale_anneal), False)
+                           tuple(config.robust_scale_anneal), False, config.scale_motion_rate_hz)
     return fit_track(energy, initial, schedule, "person test")
 
 
@@ -317,7 +318,7 @@ def test_a_moving_camera_in_sfm_units_gives_the_person_scale(model, config, prio
                   torch.as_tensor(np.stack(Rs)), torch.as_tensor(np.stack(ts)))
     energy = FitEnergy(body, track, prior, joint_limits(), config.weights, config.max_interpolated_gap)
     schedule = FitSchedule(config.global_iterations, 60, tuple(config.pose_prior_anneal),
-                           tuple(config.robust_scale_anneal), True)
+                           tuple(config.robust_scale_anneal), True, config.scale_motion_rate_hz)
     outcome = fit_track(energy, initial_state_2d(body, track, prior.mean), schedule, "person test")
     assert float(outcome.state.log_scale.exp()) == pytest.approx(units_per_metre, rel=0.1)
     assert outcome.stages[0]["scale_from_motion"] == pytest.approx(units_per_metre, rel=0.25)
@@ -381,3 +382,12 @@ def test_metric_keypoints_are_turned_onto_the_persons_viewing_ray():
     np.testing.assert_allclose(right[0, 1], [0.0, -0.5, 0.0], atol=1e-12)  # up stays up (turned about y)
     unseen = onto_viewing_rays(relative, np.zeros((1, 2, 2)), np.zeros((1, 2)), K[None])
     np.testing.assert_allclose(unseen, relative)
+
+
+def test_the_scales_motion_test_samples_the_path_at_about_its_rate():
+    """At 33 fps consecutive frames are too close for the pelvis path's motion to tell the scale (a 2D fit's depth
+    jitter swamps it): the path is judged on every 4th frame; at 8 fps on every frame."""
+    assert motion_stride(torch.arange(100, dtype=F64) / 33.0, 8.0) == 4
+    assert motion_stride(torch.arange(24, dtype=F64) / 8.0, 8.0) == 1
+    assert motion_stride(torch.tensor([0.0, 0.05, 0.1, 1.0], dtype=F64), 5.0) == 4  # the median step: 20 fps
+    assert motion_stride(torch.zeros(1, dtype=F64), 8.0) == 1

@@ -1,6 +1,7 @@
 """One floor for everyone (glimpse.fit.ground, floor_fit): the floor and placement factors recovered
 from people placed wrong by known factors, contacts, the rescaling that keeps a body's pixels, the
-floor energy's gradient, and the whole step on a scene with an adult and a child."""
+floor energy's gradient (and its units), the whole step on a scene with an adult and a child, and
+planted feet under a moving camera."""
 
 import numpy as np
 import pytest

@@ -43,6 +43,7 @@ class FitConfig:
     min_keypoints: int
     max_interpolated_gap: int
     fit_scale: Literal["auto", "always", "never"]
+    scale_motion_rate_hz: float
     weights: FitWeights
     pose_prior_motions: list[str]
     pose_prior_floor_deg: float

@@ -44,6 +44,7 @@ class FitSchedule:
     pose_prior_anneal: tuple[float, ...]  # multipliers of the pose-prior weight, one per step, last = 1
     robust_scale_anneal: tuple[float, ...]  # multipliers of the robust scale, one per step
     fit_scale: bool  # optimise the person's scale (world units per metre): frames in SfM units
+    scale_motion_rate_hz: float  # the scale's motion test samples the pelvis path at about this rate
 
 
 @dataclass
@@ -177,7 +178,7 @@ def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: 
     if track.is_2d:
         state, stage = _global_stage_2d(energy, initial, schedule, who)
         if schedule.fit_scale:
-            stage["scale_from_motion"] = _scale_from_motion(energy, state)
+            stage["scale_from_motion"] = _scale_from_motion(energy, state, schedule.scale_motion_rate_hz)
     else:
         state = initial.detached()
         energy.track = track.only(_global_indices(energy.body))
@@ -201,13 +202,26 @@ def _scale(schedule: FitSchedule) -> list[str]:
 SCALE_CANDIDATES = np.geomspace(1e-3, 1e3, 121)  # world units per metre tried by _scale_from_motion
 
 
-def _scale_from_motion(energy: FitEnergy, state: FitState) -> float:
+def motion_stride(times_s: Tensor, rate_hz: float) -> int:
+    """Every how many frames a path sampled at ``times_s`` [T] (seconds) is about ``rate_hz`` apart (at least 1)."""
+    if len(times_s) < 2:
+        return 1
+    frame_rate = 1.0 / float(torch.median(times_s[1:] - times_s[:-1]).clamp(min=1e-9))
+    return max(1, round(frame_rate / rate_hz))
+
+
+def _scale_from_motion(energy: FitEnergy, state: FitState, rate_hz: float) -> float:
     """In SfM units one view cannot tell a person's size from its distance: every scale s fits the
     keypoints once each frame's body is moved along its camera's rays to s times its distance.
     Across a moving camera's frames only the right s makes the person move like a person: pick
     the candidate whose pelvis path (in metres of body) has the least speed and acceleration
-    energy, and rescale the state to it. Returns the scale chosen (1 when nothing tells)."""
+    energy, and rescale the state to it. The path is judged on frames about ``rate_hz`` apart (every
+    stride-th frame, summed over the stride's offsets): between consecutive frames of a fast video, the
+    fit's depth jitter outweighs the camera's motion in the accelerations. Returns the scale chosen (1
+    when nothing tells)."""
     track, w = energy.track, energy.weights
+    stride = motion_stride(track.times_s, rate_hz)
+    max_gap = energy.max_gap_frames * stride  # frames: as long in time as max_gap_frames between every frame
     with torch.no_grad():
         root = energy.posed(state).joints[:, 0]  # [T, 3] at the state's scale
         centres = -torch.einsum("tji,tj->ti", track.R, track.t)  # camera centres [T, 3]
@@ -216,10 +230,14 @@ def _scale_from_motion(energy: FitEnergy, state: FitState) -> float:
         for candidate in SCALE_CANDIDATES:
             factor = candidate / scale_now
             metres = (centres + factor * (root - centres)) / candidate
-            costs.append(float(speed_energy(metres, track.times_s, track.frame_ids, w.speed_sigma_m_s,
-                                            energy.max_gap_frames)
-                               + acceleration_energy(metres[:, None], track.times_s, track.frame_ids,
-                                                     w.accel_sigma_m_s2, energy.max_gap_frames)))
+            cost = 0.0
+            for offset in range(stride):
+                rows = slice(offset, None, stride)
+                times, frame_ids = track.times_s[rows], track.frame_ids[rows]
+                cost += float(speed_energy(metres[rows], times, frame_ids, w.speed_sigma_m_s, max_gap)
+                              + acceleration_energy(metres[rows][:, None], times, frame_ids, w.accel_sigma_m_s2,
+                                                    max_gap))
+            costs.append(cost)
         costs = np.array(costs)
         if not np.isfinite(costs).all() or costs.max() - costs.min() <= 1e-9 * max(costs.max(), 1.0):
             return float(scale_now)

@@ -147,7 +147,7 @@ class Fitter:
             raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
                                f"{c.pose_prior_anneal} must have one value per full-stage step each")
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
-                               tuple(c.robust_scale_anneal), self.fit_scale)
+                               tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz)
         try:
             if not track.is_2d:
                 initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
