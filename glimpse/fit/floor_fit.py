@@ -114,7 +114,7 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, floor, float(factor), soles_body, g)
+            p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor))
             p.seconds += time.perf_counter() - started
     anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
@@ -152,7 +152,7 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
         p.ground = {"contact_sole_points": int(f.contact.sum())}
         if p.mode == "keypoints2d":
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, None, 1.0, soles_body, g)
+            p.ground["refit"] = _refit(p, f, soles_body, g)
             p.seconds += time.perf_counter() - started
     return {"applied": True, "planted_feet_only": True,
             "why": "the camera moves: each person fitted from 2D keypoints is refitted with its feet still while they "
@@ -187,10 +187,10 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.n
     return _Feet(soles, up, standing, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
 
-def _refit(pending: PendingFit, feet: _Feet, floor: Floor | None, factor: float, soles_body: KeypointBody,
-           g: GroundConfig) -> dict:
-    """Refit ``pending`` moved by ``factor`` about the floor's camera centre onto ``floor`` (None: planted feet
-    only, not moved)."""
+def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: GroundConfig, floor: Floor | None = None,
+           factor: float = 1.0) -> dict:
+    """Refit ``pending`` moved by ``factor`` about the floor's camera centre onto ``floor``; without a floor,
+    with planted feet only and not moved."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None
