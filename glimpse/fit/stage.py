@@ -146,6 +146,8 @@ class Fitter:
         if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
             raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
                                f"{c.pose_prior_anneal} must have one value per full-stage step each")
+        if not c.scale_motion_rate_hz > 0:
+            raise GlimpseError(f"02_smpl_fit.scale_motion_rate_hz must be above 0 (Hz), found {c.scale_motion_rate_hz}")
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
                                tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz)
         try:
