@@ -17,10 +17,12 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import (FitSchedule, choose_turns, fit_track, initial_state_2d, initial_state_3d,
+from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, initial_state_2d,
+                                      initial_state_3d,
                                      motion_stride)
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
-from glimpse.fit.priors import build_pose_prior, joint_limits, mirror_body_pose, motion_poses
+from glimpse.fit.priors import (build_pose_prior, joint_limits, mirror_body_pose, motion_poses,
+                                representative_poses)
 from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
 
 F64 = torch.float64
@@ -194,12 +196,24 @@ def _posed_keypoints(body: KeypointBody, params: BodyParams):
                     torch.tensor(params.scale, dtype=F64))
 
 
-def _fit(model, config, prior, track, initial, full_iterations: int = 60):
+def _static_view(points, eye, target):
+    """A 320x240, 60-degree camera at ``eye`` looking at ``target`` over every frame of ``points`` [T, K, 3]:
+    (K, R, t per frame, the points in the camera's axes, their pixels)."""
+    K = intrinsics(320, 240, 60.0)
+    R, t = look_at_pose(np.array(eye, float), np.array(target, float))
+    Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], len(points), 0)) for a in (K, R, t))
+    cam = torch.einsum("ij,tkj->tki", Rs[0], points) + ts[0]
+    pixels = cam[..., :2] / cam[..., 2:] * torch.tensor([K[0, 0], K[1, 1]]) + torch.as_tensor(K[:2, 2])
+    return Ks, Rs, ts, cam, pixels
+
+
+def _fit(model, config, prior, track, initial, full_iterations: int = 60, pose_hypotheses=None):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
     schedule = FitSchedule(config.global_iterations, full_iterations, tuple(config.pose_prior_anneal),
-                           tuple(config.robust_scale_anneal), False, config.scale_motion_rate_hz)
-    return fit_track(energy, initial, schedule, "person test")
+                           tuple(config.robust_scale_anneal), False, config.scale_motion_rate_hz,
+                           config.pose_hypothesis_iterations, config.pose_hypothesis_joint_speed_m_s)
+    return fit_track(energy, initial, schedule, "person test", pose_hypotheses)
 
 
 def _as_params(outcome, frame_ids):
@@ -250,18 +264,72 @@ def test_a_crouch_fitted_to_3d_keypoints_keeps_its_legs(model, config, prior):
 def test_fit_to_clean_2d_keypoints_recovers_the_body_up_to_depth(model, config, prior):
     truth = _known_person(model, 10)
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    points = _posed_keypoints(body, truth)
-    K = intrinsics(320, 240, 60.0)
-    R, t = look_at_pose(np.array([0.0, 1.5, -1.0]), np.array([0.3, 1.0, 3.5]))
-    Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], 10, 0)) for a in (K, R, t))
-    cam = torch.einsum("ij,tkj->tki", Rs[0], points.keypoints) + ts[0]
-    pixels = cam[..., :2] / cam[..., 2:] * torch.tensor([K[0, 0], K[1, 1]]) + torch.as_tensor(K[:2, 2])
+    Ks, Rs, ts, _, pixels = _static_view(_posed_keypoints(body, truth).keypoints, [0.0, 1.5, -1.0], [0.3, 1.0, 3.5])
     track = Track(torch.arange(10), torch.arange(10, dtype=F64) / 10, pixels, torch.ones(10, 17, dtype=F64),
                   Ks, Rs, ts)
     outcome = _fit(model, config, prior, track, initial_state_2d(body, track, prior.mean))
     errors = joint_errors(model, _as_params(outcome, truth.frame_ids), _truth(truth))
     assert errors["sequence_aligned_m"] < 0.05, errors
     assert errors["frame_aligned_m"] < 0.05, errors  # (as fitted, depth and body size trade off)
+
+
+def test_representative_poses_start_at_the_mean_and_spread_out():
+    motions = ["walk", "sit"]
+    poses = representative_poses(motions, 6)
+    library = motion_poses(motions)
+    library = np.concatenate([library, mirror_body_pose(library)])
+    assert poses.shape == (6, 69)
+    assert np.allclose(poses[0], library.mean(0))
+    assert all(any(np.allclose(p, q) for q in library) for p in poses[1:])  # the others are the motions' own
+    gaps = [min(np.linalg.norm(poses[i] - poses[j]) for j in range(i)) for i in range(1, 6)]
+    assert all(a >= b - 1e-12 for a, b in zip(gaps, gaps[1:]))  # each next one nearer the ones before
+    assert np.array_equal(representative_poses(motions, 6), poses)
+    assert len(representative_poses(["walk"], 10_000)) == 2 * len(motion_poses(["walk"])) + 1  # all there is
+
+
+def test_cheapest_path_pays_for_changing_hypothesis():
+    data = np.array([[0.0, 0.0, 5.0, 5.0], [1.0, 1.0, 0.0, 0.0]])
+    free = cheapest_path(data, lambda t: np.zeros((2, 2)))
+    assert free.tolist() == [0, 0, 1, 1]
+    change = np.array([[0.0, 20.0], [20.0, 0.0]])
+    assert cheapest_path(data, lambda t: change).tolist() == [1, 1, 1, 1]  # switching costs more than it gains
+
+
+def test_a_crouch_facing_the_camera_is_found_from_2d_keypoints_with_pose_hypotheses(model, config):
+    """A person crouching towards the camera (as in the crouch fixture): its thighs point at the camera, so a
+    body started standing sits on a saddle of the 2D energy (bending towards the camera moves no keypoint at
+    first) and the fit keeps the legs nearly straight, even with a prior that knows crouching (the stage's
+    default, a mixture over the built-in motions). Started from poses spread over the prior's motions as
+    well, the fit finds the crouch."""
+    frames, fps = 24, 8.0
+    motion = builtin_motion("crouch", frames, fps=fps)
+    yaw = np.radians(200.0)  # nearly facing the camera (the motion faces +z, the camera looks along +z)
+    turn = np.array([[np.cos(yaw), 0.0, np.sin(yaw)], [0.0, 1.0, 0.0], [-np.sin(yaw), 0.0, np.cos(yaw)]])
+    truth = BodyParams(np.arange(frames), np.zeros(10), np.tile([0.0, yaw, 0.0], (frames, 1)), motion.body_pose,
+                       motion.transl @ turn.T + [0.3, 0.0, 2.0], 1.0, "free", np.zeros(frames, bool))
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    Ks, Rs, ts, _, pixels = _static_view(_posed_keypoints(body, truth).keypoints, [0.0, 1.5, -2.5], [0.0, 1.0, 1.8])
+    track = Track(torch.arange(frames), torch.arange(frames, dtype=F64) / fps, pixels,
+                  torch.ones(frames, 17, dtype=F64), Ks, Rs, ts)
+    prior = build_pose_prior(config.pose_prior_motions, config.pose_prior_floor_deg, mixture=config.pose_prior_mixture)
+    assert "crouch" in config.pose_prior_motions and config.pose_hypotheses > 1
+    spread = representative_poses(config.pose_prior_motions, config.pose_hypotheses)[1:]
+    hypotheses = torch.cat([prior.mean[None], torch.as_tensor(spread)])
+    knee = JOINT_NAMES.index("left_knee")
+    deepest = int(np.argmax(np.abs(motion.body_pose[:, 3 * (knee - 1)])))
+    errors, knee_error_deg = {}, {}
+    for name, poses in (("standing only", None), ("hypotheses", hypotheses)):
+        outcome = _fit(model, config, prior, track, initial_state_2d(body, track, prior.mean), 60, poses)
+        fitted = _as_params(outcome, truth.frame_ids)
+        errors[name] = joint_errors(model, fitted, _truth(truth))["frame_aligned_m"]
+        ours, true = (body_joints(model, p.betas, p.global_orient, p.body_pose, p.transl)[deepest]
+                      for p in (fitted, truth))
+        angle = lambda j: np.degrees(np.arccos(np.dot(j[1] - j[4], j[7] - j[4])  # noqa: E731
+                                               / np.linalg.norm(j[1] - j[4]) / np.linalg.norm(j[7] - j[4])))
+        knee_error_deg[name] = abs(angle(ours) - angle(true))  # hip-knee-ankle, left leg
+        assert ("pose_hypotheses" in [s["stage"] for s in outcome.stages]) == (poses is not None)
+    assert errors["hypotheses"] < 0.3 * errors["standing only"], errors
+    assert knee_error_deg["hypotheses"] < 10.0 < knee_error_deg["standing only"], knee_error_deg
 
 
 def test_a_fit_that_diverges_stops_with_a_clear_message(model, config, prior):
@@ -335,12 +403,7 @@ def _child_seen_from(model, frames: int):
     truth = BodyParams(base.frame_ids, child, base.global_orient, base.body_pose, base.transl, 1.0, "free",
                        base.interpolated)
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    points = _posed_keypoints(body, truth).keypoints
-    K = intrinsics(320, 240, 60.0)
-    R, t = look_at_pose(np.array([0.0, 1.5, -1.0]), np.array([0.3, 1.0, 3.5]))
-    Ks, Rs, ts = (torch.as_tensor(np.repeat(a[None], frames, 0)) for a in (K, R, t))
-    cam = torch.einsum("ij,tkj->tki", Rs[0], points) + ts[0]
-    pixels = cam[..., :2] / cam[..., 2:] * torch.tensor([K[0, 0], K[1, 1]]) + torch.as_tensor(K[:2, 2])
+    Ks, Rs, ts, cam, pixels = _static_view(_posed_keypoints(body, truth).keypoints, [0.0, 1.5, -1.0], [0.3, 1.0, 3.5])
     relative = cam - cam[:, [11, 12]].mean(1, keepdim=True)  # COCO-17 hips
     ones = torch.ones(frames, 17, dtype=F64)
     return truth, body, Track(torch.arange(frames), torch.arange(frames, dtype=F64) / 10, pixels, ones, Ks, Rs, ts,

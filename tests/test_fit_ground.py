@@ -13,8 +13,8 @@ from glimpse.body.models import BodyModels
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
-from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, lowest_points, person_camera_heights,
-                                placement_factors, plane_weights, speed_across_view)
+from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, implausible_factors, lowest_points,
+                                person_camera_heights, placement_factors, plane_weights, speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import rescale_about
 from glimpse.fit.objective import FitState, FloorContact, project
@@ -70,6 +70,13 @@ def test_floor_and_factors_are_recovered_from_people_placed_wrong():
     assert factors[2] == 1.0
     floor = Floor(normal, CAMERA, camera_height)
     np.testing.assert_allclose(floor.height_of(np.concatenate(people)), 0.0, atol=0.01)
+
+
+def test_a_floor_that_would_move_someone_beyond_any_size_error_is_named():
+    """A child fitted at an adult's size needs about 0.65; a fit with its legs wrong asked for 2.5."""
+    factors = np.array([0.65, 1.0, 2.47, 0.5, 1.8])
+    assert implausible_factors(factors, 1.8) == [2, 3]
+    assert implausible_factors(factors, 2.5) == []
 
 
 def test_one_line_of_contacts_leaves_the_tilt_about_it_to_the_up_hint():

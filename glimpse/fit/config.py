@@ -32,6 +32,7 @@ class GroundConfig:
     floor_sigma_m: float
     skate_sigma_m_s: float
     shape_ridge: float
+    max_placement_factor: float
     iterations: int
 
 
@@ -49,6 +50,9 @@ class FitConfig:
     pose_prior_floor_deg: float
     pose_prior_mixture: bool
     pose_prior_mixture_joints: list[str]
+    pose_hypotheses: int
+    pose_hypothesis_iterations: int
+    pose_hypothesis_joint_speed_m_s: float
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]

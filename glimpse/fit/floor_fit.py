@@ -30,9 +30,9 @@ from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.config import FitConfig, GroundConfig
-from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, lowest_points, near_own_plane,
-                                person_camera_heights, placement_factors, plane_weights, speed_across_view,
-                                standing_weights)
+from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, implausible_factors,
+                                lowest_points, near_own_plane, person_camera_heights, placement_factors, plane_weights,
+                                speed_across_view, standing_weights)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import FitEnergy, FloorContact
@@ -108,6 +108,13 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
     camera_height, factors = placement_factors(heights, anchored, trust)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
+    implausible = [f"{pending[i].person.pid} ({factors[i]:.2f})"
+                   for i in implausible_factors(factors, g.max_placement_factor)]
+    if implausible:
+        return {"applied": False, "reason": f"the people's feet do not agree on a floor: it would move "
+                                            f"{', '.join(implausible)} to that many times its distance and size, "
+                                            f"beyond 02_smpl_fit.ground.max_placement_factor "
+                                            f"({g.max_placement_factor})"}
     floor = Floor(normal, centre, camera_height)
     for p, f, height, factor, soles_body in zip(pending, feet, heights, factors, soles_bodies):
         p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),

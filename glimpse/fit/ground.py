@@ -161,3 +161,10 @@ def placement_factors(heights: np.ndarray, anchored: np.ndarray,
         camera_height = float(np.exp((w * np.log(np.where(known, heights, 1.0))).sum() / w.sum()))
     factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
     return camera_height, factors
+
+
+def implausible_factors(factors: np.ndarray, max_factor: float) -> list[int]:
+    """Indices of the placement ``factors`` [P] beyond ``max_factor`` either way (above it or below its inverse):
+    a person moved to that many times its distance would be that many times its fitted size, which no
+    person's size error explains (a fit with its legs wrong does)."""
+    return [i for i, factor in enumerate(factors) if not 1.0 / max_factor <= factor <= max_factor]

@@ -1,4 +1,5 @@
-"""Fitting one person's body to keypoints over time: an initial guess, a global stage, a full stage.
+"""Fitting one person's body to keypoints over time: an initial guess, a global stage, pose hypotheses
+(2D), a full stage.
 
 1. Initial guess, per frame. 3D: the similarity (rotation, translation, and scale where fitted)
    that best maps the standing body's torso keypoints (shoulders, hips) onto the observed ones
@@ -10,7 +11,11 @@
    In 2D every frame is also tried turned by 90, 180 and 270 degrees about its up axis, and the
    sequence of turns that explains the keypoints best without spinning round between frames is
    kept (choose_turns).
-3. Full stage: everything, with the priors; the pose prior's weight annealed from strong to
+3. Pose hypotheses (2D): each frame started again from several poses spread over the prior's
+   motions and minimised alone; per frame the hypothesis that explains it best without the body
+   changing shape between frames is kept (a crouch whose thighs point at the camera is a saddle
+   of the 2D energy for a body started standing).
+4. Full stage: everything, with the priors; the pose prior's weight annealed from strong to
    its final value (SMPLify) while the robust scale shrinks from wide (a limb far from its
    keypoints still feels them) to its final value (outliers count little), each step minimised
    by L-BFGS with a strong-Wolfe line search.
@@ -18,6 +23,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +51,8 @@ class FitSchedule:
     robust_scale_anneal: tuple[float, ...]  # multipliers of the robust scale, one per step
     fit_scale: bool  # optimise the person's scale (world units per metre): frames in SfM units
     scale_motion_rate_hz: float  # the scale's motion test samples the pelvis path at about this rate
+    hypothesis_iterations: int = 0  # 2D: L-BFGS iterations of the pose-hypotheses stage (0: no such stage)
+    hypothesis_joint_speed_m_s: float = 1.0  # 2D: changing hypothesis between frames costs joint speed / this
 
 
 @dataclass
@@ -171,8 +179,10 @@ def _minimise(energy: FitEnergy, state: FitState, names: list[str], iterations: 
     return {"stage": stage, "iterations": int(optimiser.state[variables[0]]["n_iter"]), "energy": terms}
 
 
-def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> FitOutcome:
-    """Run the global and full stages from ``initial``; ``who`` names the person in errors."""
+def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str,
+              pose_hypotheses: Tensor | None = None) -> FitOutcome:
+    """Run the global, pose-hypotheses (2D, with ``pose_hypotheses`` [H, 69] and H > 1) and full stages from
+    ``initial``; ``who`` names the person in errors."""
     track = energy.track
     energy.use_priors, energy.use_speed = False, schedule.fit_scale
     if track.is_2d:
@@ -185,6 +195,10 @@ def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: 
         stage = _minimise(energy, state, ["global_orient", "transl", *_scale(schedule)], schedule.global_iterations,
                           who, "global")
     stages = [stage]
+    if track.is_2d and pose_hypotheses is not None and len(pose_hypotheses) > 1 and schedule.hypothesis_iterations:
+        energy.track = track
+        state, stage = _pose_hypotheses_stage(energy, state, pose_hypotheses, schedule, who)
+        stages.append(stage)
     energy.track, energy.use_priors = track, True
     for step, (multiplier, robust) in enumerate(zip(schedule.pose_prior_anneal, schedule.robust_scale_anneal,
                                                     strict=True)):
@@ -249,24 +263,14 @@ def _scale_from_motion(energy: FitEnergy, state: FitState, rate_hz: float) -> fl
     return best
 
 
-def choose_turns(data: np.ndarray, orients: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray,
-                 sigma_deg_s: float, max_gap_frames: int) -> np.ndarray:
-    """The hypothesis per frame minimising data + turning cost over the sequence (Viterbi).
-
-    data [H, T] each hypothesis' data energy per frame; orients [H, T, 3] their root orientations
-    (axis-angle); turning from one frame to the next at w deg/s costs (w / sigma_deg_s)^2, between
-    frames at most max_gap_frames apart (a person does not spin round between two frames; a
-    profile fitted facing backwards in one frame would). Returns [T] hypothesis indices."""
+def cheapest_path(data: np.ndarray, step_cost: Callable[[int], np.ndarray]) -> np.ndarray:
+    """Viterbi: the hypothesis per frame minimising the sum of ``data`` [H, T] (each hypothesis' energy per
+    frame) and ``step_cost(t)`` [H, H] (from each hypothesis at frame t - 1 to each at frame t). Returns [T]
+    hypothesis indices."""
     hypotheses, frames = data.shape
     total, back = data[:, 0].copy(), np.zeros((frames, hypotheses), np.int64)
     for t in range(1, frames):
-        step = np.zeros((hypotheses, hypotheses))  # [previous, current]
-        if frame_ids[t] - frame_ids[t - 1] <= max_gap_frames:
-            before = Rotation.from_rotvec(np.repeat(orients[:, t - 1], hypotheses, 0))
-            after = Rotation.from_rotvec(np.tile(orients[:, t], (hypotheses, 1)))
-            degrees = np.degrees((before.inv() * after).magnitude()).reshape(hypotheses, hypotheses)
-            step = (degrees / max(times_s[t] - times_s[t - 1], 1e-9) / sigma_deg_s) ** 2
-        candidates = total[:, None] + step
+        candidates = total[:, None] + step_cost(t)  # [previous, current]
         back[t] = candidates.argmin(0)
         total = candidates.min(0) + data[:, t]
     chosen = np.zeros(frames, np.int64)
@@ -274,6 +278,72 @@ def choose_turns(data: np.ndarray, orients: np.ndarray, times_s: np.ndarray, fra
     for t in range(frames - 1, 0, -1):
         chosen[t - 1] = back[t, chosen[t]]
     return chosen
+
+
+def choose_turns(data: np.ndarray, orients: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray,
+                 sigma_deg_s: float, max_gap_frames: int) -> np.ndarray:
+    """The hypothesis per frame minimising data + turning cost over the sequence (cheapest_path).
+
+    data [H, T] each hypothesis' data energy per frame; orients [H, T, 3] their root orientations
+    (axis-angle); turning from one frame to the next at w deg/s costs (w / sigma_deg_s)^2, between
+    frames at most max_gap_frames apart (a person does not spin round between two frames; a
+    profile fitted facing backwards in one frame would). Returns [T] hypothesis indices."""
+    hypotheses = len(data)
+
+    def turning(t: int) -> np.ndarray:
+        if frame_ids[t] - frame_ids[t - 1] > max_gap_frames:
+            return np.zeros((hypotheses, hypotheses))
+        before = Rotation.from_rotvec(np.repeat(orients[:, t - 1], hypotheses, 0))
+        after = Rotation.from_rotvec(np.tile(orients[:, t], (hypotheses, 1)))
+        degrees = np.degrees((before.inv() * after).magnitude()).reshape(hypotheses, hypotheses)
+        return (degrees / max(times_s[t] - times_s[t - 1], 1e-9) / sigma_deg_s) ** 2
+
+    return cheapest_path(data, turning)
+
+
+def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, schedule: FitSchedule,
+                           who: str) -> tuple[FitState, dict]:
+    """Each frame started from every pose of ``poses`` [H, 69] (placed as the global stage left it) and
+    minimised alone against all its keypoints, with the pose prior and joint limits at their final weights
+    (frames are independent here, all hypotheses at once); then per frame the hypothesis that explains the
+    frame best without the body changing shape between frames (cheapest_path: a change of hypothesis costs
+    the joints' squared speed relative to the pelvis, metres of body per second, over
+    ``hypothesis_joint_speed_m_s`` squared). A body started standing stays standing where a crouch's
+    thighs point at the camera (the 2D energy has no slope there); started crouching, it finds the crouch."""
+    track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(poses)
+    repeat = lambda x: x.repeat(hypotheses, *([1] * (x.ndim - 1)))  # noqa: E731
+    batch = FitState(state.betas.clone(), repeat(state.global_orient), poses.repeat_interleave(frames, 0),
+                     repeat(state.transl), state.log_scale.clone())
+    energy.track, energy.use_priors, energy.frames_independent = track.repeated(hypotheses), True, True
+    energy.pose_prior_scale = schedule.pose_prior_anneal[-1]
+    energy.robust_scale_factor = schedule.robust_scale_anneal[-1]
+    energy.update_depth_reference(batch)
+    try:
+        stage = _minimise(energy, batch, ["global_orient", "body_pose", "transl"], schedule.hypothesis_iterations,
+                          who, "pose_hypotheses")
+        with torch.no_grad():
+            posed = energy.posed(batch)
+            per_frame = energy.frame_energy(batch).reshape(hypotheses, frames)
+            relative = (posed.joints - posed.joints[:, :1]) / batch.log_scale.exp()  # [H T, 24, 3] metres
+    finally:
+        energy.track, energy.frames_independent = track, False
+    relative = relative.reshape(hypotheses, frames, -1).numpy()
+    times, ids = track.times_s.numpy(), track.frame_ids.numpy()
+
+    def changing(t: int) -> np.ndarray:
+        if ids[t] - ids[t - 1] > energy.max_gap_frames:
+            return np.zeros((hypotheses, hypotheses))
+        moved = relative[:, None, t] - relative[None, :, t - 1]  # [current, previous, 24 * 3]
+        squared = (moved**2).sum(-1).T  # [previous, current]
+        speed_scale = max(times[t] - times[t - 1], 1e-9) * schedule.hypothesis_joint_speed_m_s
+        return squared / speed_scale**2
+
+    best = torch.as_tensor(cheapest_path(per_frame.numpy(), changing))
+    rows = best * frames + torch.arange(frames)
+    chosen = FitState(state.betas.clone(), batch.global_orient[rows].clone(), batch.body_pose[rows].clone(),
+                      batch.transl[rows].clone(), state.log_scale.clone())
+    stage["hypothesis_frames"] = np.bincount(best.numpy(), minlength=hypotheses).tolist()
+    return chosen, stage
 
 
 def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> tuple[FitState, dict]:

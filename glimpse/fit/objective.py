@@ -196,6 +196,7 @@ class FitEnergy:
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
         self.floor: FloorContact | None = None  # the common floor, set for the ground refit
+        self.frames_independent = False  # True: only the per-frame terms (a batch of pose hypotheses)
         self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
 
     def posed(self, state: FitState):
@@ -233,16 +234,37 @@ class FitEnergy:
         return data_energy(relative, track.relative3d_weight, w.relative3d_noise_m,
                            w.relative3d_robust_m * self.robust_scale_factor)
 
+    def frame_terms(self, state: FitState, keypoints: Tensor | None = None) -> dict[str, Tensor]:
+        """The terms that belong to one frame each, [T] per term, unweighted: data, metric 3D (where the track
+        has it), and with the priors on, the pose prior and the joint limits (``terms`` weighs them)."""
+        keypoints = self.posed(state).keypoints if keypoints is None else keypoints
+        terms = {"data": self.keypoint_data_per_frame(keypoints)}
+        metric = self.relative3d_per_frame(state, keypoints)
+        if metric is not None:
+            terms["metric_3d"] = metric
+        if self.use_priors:
+            terms["pose_prior"] = self.prior.energy(state.body_pose)
+            terms["joint_limits"] = self.limits.energy(state.body_pose)
+        return terms
+
+    def frame_energy(self, state: FitState) -> Tensor:
+        """[T] the weighted sum of frame_terms per frame."""
+        weights = self.frame_weights()
+        return sum(weights[name] * value for name, value in self.frame_terms(state).items())
+
+    def frame_weights(self) -> dict[str, float]:
+        """The multipliers of frame_terms' terms (the pose prior's with its annealing)."""
+        w = self.weights
+        return {"data": 1.0, "metric_3d": 1.0, "pose_prior": w.pose_prior * self.pose_prior_scale,
+                "joint_limits": w.joint_limits}
+
     def terms(self, state: FitState) -> dict[str, Tensor]:
+        """Every term, summed over the frames (``frames_independent``: only those of frame_terms)."""
         w = self.weights
         out = self.posed(state)
-        terms = {"data": self.keypoint_data_per_frame(out.keypoints).sum()}
-        metric = self.relative3d_per_frame(state, out.keypoints)
-        if metric is not None:
-            terms["metric_3d"] = metric.sum()
-        if self.use_priors:
-            terms["pose_prior"] = w.pose_prior * self.pose_prior_scale * self.prior.energy(state.body_pose).sum()
-            terms["joint_limits"] = w.joint_limits * self.limits.energy(state.body_pose).sum()
+        weights = self.frame_weights()
+        terms = {name: weights[name] * value.sum() for name, value in self.frame_terms(state, out.keypoints).items()}
+        if self.use_priors and not self.frames_independent:
             terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
             metres = out.joints / state.log_scale.exp()  # motion is judged in metres of body
             terms["smoothness"] = acceleration_energy(metres, self.track.times_s, self.track.frame_ids,

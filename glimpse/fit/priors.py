@@ -66,6 +66,23 @@ def motion_poses(sources: list[str]) -> np.ndarray:
     return np.concatenate(poses)
 
 
+def representative_poses(sources: list[str], count: int) -> np.ndarray:
+    """[count, 69] poses spread over the listed motions' poses and their mirror images: their mean first,
+    then each next the pose farthest (axis-angle distance) from those already taken. Where a fit from
+    2D keypoints starts its pose hypotheses (a crouch whose thighs point at the camera is a saddle of
+    the 2D energy for a body started standing: bending towards the camera moves no keypoint at first).
+    Deterministic."""
+    poses = motion_poses(sources)
+    poses = np.concatenate([poses, mirror_body_pose(poses)])
+    chosen = [poses.mean(0)]
+    nearest = np.linalg.norm(poses - chosen[0], axis=1)
+    while len(chosen) < min(count, len(poses) + 1):
+        far = int(nearest.argmax())
+        chosen.append(poses[far])
+        nearest = np.minimum(nearest, np.linalg.norm(poses - poses[far], axis=1))
+    return np.stack(chosen)
+
+
 @dataclass(frozen=True)
 class PosePrior:
     """A mixture of Gaussians over body_pose, equal weights. means [C, 69] radians; whitenings

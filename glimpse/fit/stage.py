@@ -31,7 +31,8 @@ from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
 from glimpse.fit.objective import FitEnergy, FitState, Track
-from glimpse.fit.priors import PartedPosePrior, PosePrior, build_parted_pose_prior, build_pose_prior, joint_limits
+from glimpse.fit.priors import (PartedPosePrior, PosePrior, build_parted_pose_prior, build_pose_prior, joint_limits,
+                                representative_poses)
 from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, summary
 from glimpse.io.images import frame_name
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
@@ -61,6 +62,7 @@ class Fitter:
         self.undistorter = scene_undistorter(scene)
         self._bodies: dict[tuple[str, int], KeypointBody] = {}
         self._prior: PosePrior | PartedPosePrior | None = None
+        self._pose_hypotheses: torch.Tensor | None = None
 
     def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
         """(frame_ids [T], layout, values [T, K, D+1]) of a person's 3D keypoints (world) or 2D keypoints
@@ -93,6 +95,16 @@ class Fitter:
                 self._prior = build_pose_prior(c.pose_prior_motions, c.pose_prior_floor_deg, self.dtype,
                                                c.pose_prior_mixture)
         return self._prior
+
+    @property
+    def pose_hypotheses(self) -> torch.Tensor:
+        """[H, 69] where 2D fits start their pose hypotheses: the pose prior's mean (where every fit starts)
+        and H - 1 poses spread over the prior's motions (glimpse.fit.priors.representative_poses)."""
+        if self._pose_hypotheses is None:
+            c = self.config
+            spread = representative_poses(c.pose_prior_motions, c.pose_hypotheses)[1:]
+            self._pose_hypotheses = torch.cat([self.prior.mean[None], torch.as_tensor(spread, dtype=self.dtype)])
+        return self._pose_hypotheses
 
     def image_keypoints(self, person: HumanInputs) -> tuple[np.ndarray, np.ndarray] | None:
         """(frame_ids [T], [T, K, 3] pixel x, y, confidence) of a person's confident keypoints in the
@@ -148,8 +160,12 @@ class Fitter:
                                f"{c.pose_prior_anneal} must have one value per full-stage step each")
         if not c.scale_motion_rate_hz > 0:
             raise GlimpseError(f"02_smpl_fit.scale_motion_rate_hz must be above 0 (Hz), found {c.scale_motion_rate_hz}")
+        if c.pose_hypotheses < 1:
+            raise GlimpseError(f"02_smpl_fit.pose_hypotheses must be at least 1 (1: only the prior's mean), "
+                               f"found {c.pose_hypotheses}")
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
-                               tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz)
+                               tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz,
+                               c.pose_hypothesis_iterations, c.pose_hypothesis_joint_speed_m_s)
         try:
             if not track.is_2d:
                 initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
@@ -157,7 +173,7 @@ class Fitter:
                 initial = self._initial_from_3d(person, track, body)
             else:
                 initial = initial_state_2d(body, track, self.prior.mean)
-            outcome = fit_track(energy, initial, schedule, who)
+            outcome = fit_track(energy, initial, schedule, who, self.pose_hypotheses if track.is_2d else None)
         except GlimpseError as exc:
             message = str(exc) if str(exc).startswith(who) else f"{who}: {exc}"
             raise GlimpseError(f"{message} ({file})") from None
