@@ -34,7 +34,7 @@ from torch import Tensor
 from glimpse.cameras.align import umeyama
 from glimpse.errors import GlimpseError
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.objective import FitEnergy, FitState, Track, acceleration_energy, speed_energy
+from glimpse.fit.objective import FitEnergy, FitState, Track, acceleration_energy, repeat_frames, speed_energy
 
 TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
 HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")  # tell which way a profile faces
@@ -196,7 +196,6 @@ def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: 
                           who, "global")
     stages = [stage]
     if track.is_2d and pose_hypotheses is not None and len(pose_hypotheses) > 1 and schedule.hypothesis_iterations:
-        energy.track = track
         state, stage = _pose_hypotheses_stage(energy, state, pose_hypotheses, schedule, who)
         stages.append(stage)
     energy.track, energy.use_priors = track, True
@@ -311,9 +310,9 @@ def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, sc
     ``hypothesis_joint_speed_m_s`` squared). A body started standing stays standing where a crouch's
     thighs point at the camera (the 2D energy has no slope there); started crouching, it finds the crouch."""
     track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(poses)
-    repeat = lambda x: x.repeat(hypotheses, *([1] * (x.ndim - 1)))  # noqa: E731
-    batch = FitState(state.betas.clone(), repeat(state.global_orient), poses.repeat_interleave(frames, 0),
-                     repeat(state.transl), state.log_scale.clone())
+    batch = FitState(state.betas.clone(), repeat_frames(state.global_orient, hypotheses),
+                     poses.repeat_interleave(frames, 0), repeat_frames(state.transl, hypotheses),
+                     state.log_scale.clone())
     energy.track, energy.use_priors, energy.frames_independent = track.repeated(hypotheses), True, True
     energy.pose_prior_scale = schedule.pose_prior_anneal[-1]
     energy.robust_scale_factor = schedule.robust_scale_anneal[-1]
@@ -323,7 +322,7 @@ def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, sc
                           who, "pose_hypotheses")
         with torch.no_grad():
             posed = energy.posed(batch)
-            per_frame = energy.frame_energy(batch).reshape(hypotheses, frames)
+            per_frame = energy.frame_energy(batch, posed.keypoints).reshape(hypotheses, frames)
             relative = (posed.joints - posed.joints[:, :1]) / batch.log_scale.exp()  # [H T, 24, 3] metres
     finally:
         energy.track, energy.frames_independent = track, False
@@ -355,9 +354,8 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
     for yaw in YAW_HYPOTHESES_DEG:
         orient = Rotation.from_rotvec(initial.global_orient.numpy()) * Rotation.from_euler("y", yaw, degrees=True)
         turned.append(torch.as_tensor(orient.as_rotvec(), dtype=initial.transl.dtype))
-    repeat = lambda x: x.repeat(hypotheses, *([1] * (x.ndim - 1)))  # noqa: E731
-    batch = FitState(initial.betas.clone(), torch.cat(turned), repeat(initial.body_pose), repeat(initial.transl),
-                     initial.log_scale.clone())
+    batch = FitState(initial.betas.clone(), torch.cat(turned), repeat_frames(initial.body_pose, hypotheses),
+                     repeat_frames(initial.transl, hypotheses), initial.log_scale.clone())
     selected = track.only(_global_indices(energy.body))
     energy.track = selected.repeated(hypotheses)
     energy.update_depth_reference(batch)

@@ -71,7 +71,12 @@ class Track:
 
     def repeated(self, times: int) -> "Track":
         """The track's frames repeated ``times`` times along the frame axis (a batch of hypotheses)."""
-        return Track(*(None if v is None else v.repeat(times, *([1] * (v.ndim - 1))) for v in vars(self).values()))
+        return Track(*(None if v is None else repeat_frames(v, times) for v in vars(self).values()))
+
+
+def repeat_frames(values: Tensor, times: int) -> Tensor:
+    """[T, ...] -> [times * T, ...]: the whole sequence repeated ``times`` times (a batch of hypotheses)."""
+    return values.repeat(times, *([1] * (values.ndim - 1)))
 
 
 @dataclass
@@ -247,10 +252,10 @@ class FitEnergy:
             terms["joint_limits"] = self.limits.energy(state.body_pose)
         return terms
 
-    def frame_energy(self, state: FitState) -> Tensor:
-        """[T] the weighted sum of frame_terms per frame."""
+    def frame_energy(self, state: FitState, keypoints: Tensor | None = None) -> Tensor:
+        """[T] the weighted sum of frame_terms per frame (keypoints [T, K, 3] when already posed)."""
         weights = self.frame_weights()
-        return sum(weights[name] * value for name, value in self.frame_terms(state).items())
+        return sum(weights[name] * value for name, value in self.frame_terms(state, keypoints).items())
 
     def frame_weights(self) -> dict[str, float]:
         """The multipliers of frame_terms' terms (the pose prior's with its annealing)."""
