@@ -57,6 +57,26 @@ def test_keypoint_body_equals_the_full_model(model, layout):
     assert torch.allclose(fast.keypoints, kmap(full.joints, full.vertices), atol=1e-6)  # metres
 
 
+def test_size_ratio_is_the_rest_joints_spread_over_the_templates(model):
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    names = [str(n) for n in model.data.extras["shape_preset_names"]]
+    presets = np.asarray(model.data.extras["shape_preset_betas"])[:, :10]
+
+    def spread(betas):  # from the full model's rest joints (another path than the keypoint body's bases)
+        rest = model(torch.as_tensor(betas)[None], torch.zeros(1, 3, dtype=F64), torch.zeros(1, 69, dtype=F64))
+        joints = rest.rest_joints[0]
+        return float((joints - joints.mean(0)).square().sum(-1).mean().sqrt())
+
+    presets = presets.astype(np.float64)
+
+    assert float(body.size_ratio(torch.zeros(10, dtype=F64))) == pytest.approx(1.0)
+    for name in ("tall", "child"):
+        betas = presets[names.index(name)]
+        assert float(body.size_ratio(torch.as_tensor(betas))) == pytest.approx(spread(betas) / spread(np.zeros(10)))
+    assert float(body.size_ratio(torch.as_tensor(presets[names.index("tall")]))) > 1.1
+    assert float(body.size_ratio(torch.as_tensor(presets[names.index("child")]))) < 0.9
+
+
 def test_mirroring_a_pose_swaps_sides_and_is_its_own_inverse():
     pose = np.zeros((1, 69))
     knee = SMPL_BODY_JOINTS.index("left_knee")

@@ -50,6 +50,15 @@ class KeypointBody(torch.nn.Module):
         self.register_buffer("landmark_shapedirs", torch.einsum("kmj,kmcs->kjcs", skin, shapedirs[idx]))
         self.register_buffer("landmark_posedirs", torch.einsum("kmj,kmcp->kjcp", skin, model.posedirs[idx]))
 
+    def size_ratio(self, betas: Tensor) -> Tensor:
+        """[] the shaped body's size over the template's: the RMS distance of the 24 rest joints from their
+        centroid, for betas [10]. Differentiable; 1 at betas = 0."""
+        def spread(joints: Tensor) -> Tensor:
+            return (joints - joints.mean(0)).square().sum(-1).mean().sqrt()
+
+        shaped = self.joint_template + torch.einsum("jcs,s->jc", self.joint_shapedirs, betas)
+        return spread(shaped) / spread(self.joint_template)
+
     def forward(self, betas: Tensor, global_orient: Tensor, body_pose: Tensor, transl: Tensor,
                 scale: Tensor) -> KeypointBodyOutput:
         """betas [10] (shared) or [B, 10]; global_orient [B, 3]; body_pose [B, 69]; transl [B, 3]; scale [] or [B]."""

@@ -18,6 +18,9 @@
   fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
   metres of body (world units divided by the person's scale), so in SfM units they tell the scale:
   placed at the wrong depth in every frame of a moving camera, a person would race along an arc.
+  Accelerations are also divided by the body's size over the template's (``KeypointBody.size_ratio``):
+  in one view a smaller body nearer the camera projects to the same pixels and accelerates less, so
+  in metres the term would pull every 2D fit small and near.
 - floor (only in stage 02's floor step, glimpse.fit.floor_fit): sole points of the contact frames
   on the people's common floor, ``(height / sigma_floor)^2``, and any sole point below it, the same
   (static camera only); contact points that slide between consecutive contact frames,
@@ -272,7 +275,10 @@ class FitEnergy:
         if self.use_priors and not self.frames_independent:
             terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
             metres = out.joints / state.log_scale.exp()  # motion is judged in metres of body
-            terms["smoothness"] = acceleration_energy(metres, self.track.times_s, self.track.frame_ids,
+            # ... and accelerations of a body the template's size: otherwise shrinking everyone towards the
+            # camera, which 2D keypoints cannot see, would lower the smoothness term.
+            template_metres = metres / self.body.size_ratio(state.betas)
+            terms["smoothness"] = acceleration_energy(template_metres, self.track.times_s, self.track.frame_ids,
                                                       w.accel_sigma_m_s2, self.max_gap_frames)
             if self.use_speed:
                 terms["speed"] = speed_energy(metres[:, 0], self.track.times_s, self.track.frame_ids,
