@@ -60,14 +60,12 @@ def test_keypoint_body_equals_the_full_model(model, layout):
 def test_size_ratio_is_the_rest_joints_spread_over_the_templates(model):
     body = KeypointBody(model, keypoint_map("coco17", model.data))
     names = [str(n) for n in model.data.extras["shape_preset_names"]]
-    presets = np.asarray(model.data.extras["shape_preset_betas"])[:, :10]
+    presets = np.asarray(model.data.extras["shape_preset_betas"], np.float64)[:, :10]
 
     def spread(betas):  # from the full model's rest joints (another path than the keypoint body's bases)
         rest = model(torch.as_tensor(betas)[None], torch.zeros(1, 3, dtype=F64), torch.zeros(1, 69, dtype=F64))
         joints = rest.rest_joints[0]
         return float((joints - joints.mean(0)).square().sum(-1).mean().sqrt())
-
-    presets = presets.astype(np.float64)
 
     assert float(body.size_ratio(torch.zeros(10, dtype=F64))) == pytest.approx(1.0)
     for name in ("tall", "child"):
