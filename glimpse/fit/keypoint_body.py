@@ -50,21 +50,24 @@ class KeypointBody(torch.nn.Module):
         self.register_buffer("landmark_shapedirs", torch.einsum("kmj,kmcs->kjcs", skin, shapedirs[idx]))
         self.register_buffer("landmark_posedirs", torch.einsum("kmj,kmcp->kjcp", skin, model.posedirs[idx]))
 
+    def rest_joints(self, betas: Tensor) -> Tensor:
+        """betas [10] or [B, 10] -> the shaped body's 24 rest joints [24, 3] or [B, 24, 3], metres."""
+        return self.joint_template + torch.einsum("jcs,...s->...jc", self.joint_shapedirs, betas)
+
     def size_ratio(self, betas: Tensor) -> Tensor:
         """[] the shaped body's size over the template's: the RMS distance of the 24 rest joints from their
         centroid, for betas [10]. Differentiable; 1 at betas = 0."""
         def spread(joints: Tensor) -> Tensor:
             return (joints - joints.mean(0)).square().sum(-1).mean().sqrt()
 
-        shaped = self.joint_template + torch.einsum("jcs,s->jc", self.joint_shapedirs, betas)
-        return spread(shaped) / spread(self.joint_template)
+        return spread(self.rest_joints(betas)) / spread(self.joint_template)
 
     def forward(self, betas: Tensor, global_orient: Tensor, body_pose: Tensor, transl: Tensor,
                 scale: Tensor) -> KeypointBodyOutput:
         """betas [10] (shared) or [B, 10]; global_orient [B, 3]; body_pose [B, 69]; transl [B, 3]; scale [] or [B]."""
         batch = global_orient.shape[0]
         betas_b = betas.expand(batch, -1) if betas.ndim == 1 else betas
-        rest_joints = self.joint_template + torch.einsum("jcs,bs->bjc", self.joint_shapedirs, betas_b)
+        rest_joints = self.rest_joints(betas_b)
         rotations = batch_rodrigues(torch.cat([global_orient, body_pose], 1).reshape(batch, -1, 3))
         joints, transforms = batch_rigid_transform(rotations, rest_joints, self._parents)
         features = pose_features(rotations)  # [B, 207]

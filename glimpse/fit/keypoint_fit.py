@@ -380,14 +380,15 @@ def rescale_about(state: FitState, body: KeypointBody, centre: Tensor, factor: f
     unit beta^2), the pelvis path scaled about the centre, orientations and pose kept."""
     offsets = body.joint_shapedirs - body.joint_shapedirs[:1]  # [24, 3, S]: the pelvis-relative skeleton per beta
     template = body.joint_template - body.joint_template[:1]
-    old = template + torch.einsum("jcs,s->jc", offsets, state.betas)
+    rest_old = body.rest_joints(state.betas)
+    old = rest_old - rest_old[:1]
     basis = offsets.reshape(-1, offsets.shape[-1])
     target = (factor * old - template).reshape(-1)
     betas = torch.linalg.solve(basis.T @ basis + ridge * torch.eye(basis.shape[1], dtype=basis.dtype), basis.T @ target)
     scale = state.log_scale.exp()
-    pelvis_old = scale * (body.joint_template[0] + body.joint_shapedirs[0] @ state.betas) + state.transl  # [T, 3]
+    pelvis_old = scale * rest_old[0] + state.transl  # [T, 3]
     pelvis_new = centre + factor * (pelvis_old - centre)
-    transl = pelvis_new - scale * (body.joint_template[0] + body.joint_shapedirs[0] @ betas)
+    transl = pelvis_new - scale * body.rest_joints(betas)[0]
     return FitState(betas, state.global_orient.clone(), state.body_pose.clone(), transl, state.log_scale.clone())
 
 
