@@ -55,6 +55,7 @@ SEED = 0
 SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "crowd", "adult_child", "crouch")
 TOTAL_DROP = 0.3
 CONDITIONS = ("clean", "noisy", "noisy-30%")
+MODES = ("keypoints3d", "keypoints2d")  # what the bodies are fitted to
 UNSEEN_SCENARIOS = ("demo", "crowd")
 UNSEEN_SEED = 7
 
@@ -98,7 +99,7 @@ def _fit_section(ground_mode: str, params: str = "") -> dict:
 
 def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
              conditions: tuple[str, ...] = CONDITIONS, ground_mode: str = "auto", seed: int = SEED,
-             params: str = "") -> list[dict]:
+             params: str = "", modes: tuple[str, ...] = MODES) -> list[dict]:
     raw = _fit_section(ground_mode, params)
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
@@ -114,7 +115,7 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
             scene = load_scene(scene_dir)
             _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
             centres = {fid: camera.centre for fid, camera in cameras.items()}
-            for mode in ("keypoints3d", "keypoints2d"):
+            for mode in modes:
                 fitter = Fitter(scene, BodyModels(model), cameras, FitConfig(**{**vars(config), "mode": mode}),
                                 "metres")
                 started = time.perf_counter()
@@ -203,11 +204,12 @@ def print_unseen_table(size: str, rows: list[dict]) -> None:
               f"{100 * r['sequence_aligned_m']:.1f} | {r['silhouette_iou']:.3f} | {r['seconds']:.1f} |")
 
 
-def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS) -> None:
+def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS,
+                modes: tuple[str, ...] = MODES) -> None:
     print(f"\n### {size} fixtures: mean per-joint error, cm (24 joints, fitted frames)\n")
     print("| mode | condition | people | as fitted | sequence-aligned | frame-aligned (PA) | worst person, seq.-aligned | s per person |")
     print("|---|---|---|---|---|---|---|---|")
-    for mode in ("keypoints3d", "keypoints2d"):
+    for mode in modes:
         for condition in conditions:
             sel = [r for r in rows if r["mode"] == mode and r["condition"] == condition]
             worst = max(sel, key=lambda r: r["sequence_aligned_m"])
@@ -246,6 +248,8 @@ def main() -> int:
     parser.add_argument("--only-full", action="store_true", help="the full-size scenes only")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=SCENARIOS)
     parser.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=CONDITIONS)
+    parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES,
+                        help="which keypoints the bodies are fitted to (both by default)")
     parser.add_argument("--no-unseen", action="store_true", help="skip the scenes-not-seen table")
     parser.add_argument("--per-person", action="store_true", help="print every person's row too")
     parser.add_argument("--ground", choices=("auto", "off"), default="auto",
@@ -261,8 +265,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         for size in ("full",) if args.only_full else ("small", "full") if args.full else ("small",):
             rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions), args.ground, args.seed,
-                            args.params)
-            print_table(size, rows, tuple(args.conditions))
+                            args.params, tuple(args.modes))
+            print_table(size, rows, tuple(args.conditions), tuple(args.modes))
             print_placement_table(size, rows, tuple(args.conditions))
             if not args.no_unseen:
                 print_unseen_table(size, evaluate_unseen(size, Path(tmp), args.ground, args.params))

@@ -17,7 +17,8 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, initial_state_2d,
+from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
+                                      initial_state_2d,
                                       initial_state_3d,
                                      motion_stride)
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
@@ -230,7 +231,8 @@ def _fit(model, config, prior, track, initial, full_iterations: int = 60, pose_h
                        config.weights, config.max_interpolated_gap)
     schedule = FitSchedule(config.global_iterations, full_iterations, tuple(config.pose_prior_anneal),
                            tuple(config.robust_scale_anneal), False, config.scale_motion_rate_hz,
-                           config.pose_hypothesis_iterations, config.pose_hypothesis_joint_speed_m_s)
+                           config.pose_hypothesis_iterations, config.pose_hypothesis_joint_speed_m_s,
+                           config.pose_hypothesis_rate_hz)
     return fit_track(energy, initial, schedule, "person test", pose_hypotheses)
 
 
@@ -311,6 +313,31 @@ def test_cheapest_path_pays_for_changing_hypothesis():
     assert free.tolist() == [0, 0, 1, 1]
     change = np.array([[0.0, 20.0], [20.0, 0.0]])
     assert cheapest_path(data, lambda t: change).tolist() == [1, 1, 1, 1]  # switching costs more than it gains
+
+
+def test_the_hypothesis_path_follows_the_keypoints_not_the_steadiest_fit_in_a_fast_video(config):
+    """Two hypotheses per frame of a 30 fps video: one fits every frame's keypoints better but, fitted frame by
+    frame, its joints jitter by a few centimetres; the other is a steady wrong pose. Read as speeds over a
+    thirtieth of a second, the jitter cost more than the keypoints gained, and the wrong pose was kept for
+    whole seconds (the full-size demo's second person, after another person hid it for three frames)."""
+    rng = np.random.default_rng(0)
+    frames, fps, joints = 30, 30.0, 24
+    rest = rng.normal(0.0, 0.3, joints * 3)
+    fitting = rest + rng.normal(0.0, 0.03, (frames, joints * 3))  # 3 cm of jitter per coordinate
+    steady = np.repeat((rest + 0.1)[None], frames, 0)  # 10 cm off, the same every frame
+    relative = np.stack([fitting, steady])  # [H, T, J * 3]
+    data = np.stack([np.full(frames, 20.0), np.full(frames, 60.0)])  # the fitting one explains each frame better
+    speed, rate = config.pose_hypothesis_joint_speed_m_s, config.pose_hypothesis_rate_hz
+
+    def cost(rate_hz):
+        return lambda t: hypothesis_change_cost(relative[:, t - 1], relative[:, t], 1.0 / fps, speed, rate_hz)
+
+    assert cheapest_path(data, cost(fps)).tolist() == [1] * frames  # judged at the frame rate: the steady one
+    assert cheapest_path(data, cost(rate)).tolist() == [0] * frames
+    # At or below the rate, the cost is the joints' speed over the frames' own interval, as before.
+    slow = hypothesis_change_cost(relative[:, 0], relative[:, 1], 2.0 / rate, speed, rate)
+    moved = relative[:, None, 1] - relative[None, :, 0]
+    assert np.allclose(slow, (moved**2).sum(-1).T / (2.0 / rate * speed) ** 2)
 
 
 def test_a_crouch_facing_the_camera_is_found_from_2d_keypoints_with_pose_hypotheses(model, config):

@@ -53,6 +53,7 @@ class FitConfig:
     pose_hypotheses: int
     pose_hypothesis_iterations: int
     pose_hypothesis_joint_speed_m_s: float
+    pose_hypothesis_rate_hz: float
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]

@@ -53,6 +53,7 @@ class FitSchedule:
     scale_motion_rate_hz: float  # the scale's motion test samples the pelvis path at about this rate
     hypothesis_iterations: int = 0  # 2D: L-BFGS iterations of the pose-hypotheses stage (0: no such stage)
     hypothesis_joint_speed_m_s: float = 1.0  # 2D: changing hypothesis between frames costs joint speed / this
+    hypothesis_rate_hz: float = 8.0  # 2D: ... with frames judged at least 1 / this apart (seconds)
 
 
 @dataclass
@@ -300,15 +301,27 @@ def choose_turns(data: np.ndarray, orients: np.ndarray, times_s: np.ndarray, fra
     return cheapest_path(data, turning)
 
 
+def hypothesis_change_cost(before: np.ndarray, after: np.ndarray, seconds: float, joint_speed_m_s: float,
+                           rate_hz: float) -> np.ndarray:
+    """[H, H] cost of going from each hypothesis at one frame to each at the next: the squared speed of the
+    joints relative to the pelvis, ``before`` and ``after`` [H, J * 3] (metres of body), over
+    ``joint_speed_m_s`` squared, with the frames ``seconds`` apart taken at least 1 / ``rate_hz`` apart.
+    Rows: the hypothesis before; columns: after. Why the floor: each frame's hypotheses are fitted alone, and
+    their few centimetres of jitter between the frames of a 30 fps video, read as speeds, outweighed the
+    keypoints, so that the path kept was the steadiest, not the one that fits."""
+    moved = after[:, None] - before[None, :]  # [after, before, J * 3]
+    speed_scale = max(seconds, 1.0 / rate_hz) * joint_speed_m_s
+    return (moved**2).sum(-1).T / speed_scale**2
+
+
 def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, schedule: FitSchedule,
                            who: str) -> tuple[FitState, dict]:
     """Each frame started from every pose of ``poses`` [H, 69] (placed as the global stage left it) and
     minimised alone against all its keypoints, with the pose prior and joint limits at their final weights
     (frames are independent here, all hypotheses at once); then per frame the hypothesis that explains the
-    frame best without the body changing shape between frames (cheapest_path: a change of hypothesis costs
-    the joints' squared speed relative to the pelvis, metres of body per second, over
-    ``hypothesis_joint_speed_m_s`` squared). A body started standing stays standing where a crouch's
-    thighs point at the camera (the 2D energy has no slope there); started crouching, it finds the crouch."""
+    frame best without the body changing shape between frames (cheapest_path with hypothesis_change_cost).
+    A body started standing stays standing where a crouch's thighs point at the camera (the 2D energy has no
+    slope there); started crouching, it finds the crouch."""
     track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(poses)
     batch = FitState(state.betas.clone(), repeat_frames(state.global_orient, hypotheses),
                      poses.repeat_interleave(frames, 0), repeat_frames(state.transl, hypotheses),
@@ -332,10 +345,8 @@ def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, sc
     def changing(t: int) -> np.ndarray:
         if ids[t] - ids[t - 1] > energy.max_gap_frames:
             return np.zeros((hypotheses, hypotheses))
-        moved = relative[:, None, t] - relative[None, :, t - 1]  # [current, previous, 24 * 3]
-        squared = (moved**2).sum(-1).T  # [previous, current]
-        speed_scale = max(times[t] - times[t - 1], 1e-9) * schedule.hypothesis_joint_speed_m_s
-        return squared / speed_scale**2
+        return hypothesis_change_cost(relative[:, t - 1], relative[:, t], times[t] - times[t - 1],
+                                      schedule.hypothesis_joint_speed_m_s, schedule.hypothesis_rate_hz)
 
     best = torch.as_tensor(cheapest_path(per_frame.numpy(), changing))
     rows = best * frames + torch.arange(frames)

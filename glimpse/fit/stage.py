@@ -160,12 +160,16 @@ class Fitter:
                                f"{c.pose_prior_anneal} must have one value per full-stage step each")
         if not c.scale_motion_rate_hz > 0:
             raise GlimpseError(f"02_smpl_fit.scale_motion_rate_hz must be above 0 (Hz), found {c.scale_motion_rate_hz}")
+        if not c.pose_hypothesis_rate_hz > 0:
+            raise GlimpseError(f"02_smpl_fit.pose_hypothesis_rate_hz must be above 0 (Hz), "
+                               f"found {c.pose_hypothesis_rate_hz}")
         if c.pose_hypotheses < 1:
             raise GlimpseError(f"02_smpl_fit.pose_hypotheses must be at least 1 (1: only the prior's mean), "
                                f"found {c.pose_hypotheses}")
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
                                tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz,
-                               c.pose_hypothesis_iterations, c.pose_hypothesis_joint_speed_m_s)
+                               c.pose_hypothesis_iterations, c.pose_hypothesis_joint_speed_m_s,
+                               c.pose_hypothesis_rate_hz)
         try:
             if not track.is_2d:
                 initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
