@@ -18,9 +18,7 @@ from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
-                                      initial_state_2d,
-                                      initial_state_3d,
-                                     motion_stride)
+                                      initial_state_2d, initial_state_3d, motion_stride)
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
 from glimpse.fit.priors import (build_pose_prior, joint_limits, mirror_body_pose, motion_poses,
                                 representative_poses)
