@@ -144,6 +144,8 @@ def test_a_person_without_usable_keypoints_stops_the_stage_clearly(tmp_path):
     np.savez(scene / "humans" / "p0" / "keypoints3d.npz", **data)
     with pytest.raises(GlimpseError, match=r"02_smpl_fit.scale_motion_rate_hz must be above 0 \(Hz\), found 0.0"):
         run("02_smpl_fit", scene, tmp_path / "out", "02_smpl_fit.scale_motion_rate_hz=0")
+    with pytest.raises(GlimpseError, match=r"02_smpl_fit.pose_hypothesis_rate_hz must be above 0 \(Hz\), found -8.0"):
+        run("02_smpl_fit", scene, tmp_path / "out", "02_smpl_fit.pose_hypothesis_rate_hz=-8")
     with pytest.raises(GlimpseError, match=r"02_smpl_fit.pose_hypotheses must be at least 1 .*, found 0"):
         run("02_smpl_fit", scene, tmp_path / "out", "02_smpl_fit.pose_hypotheses=0")
 

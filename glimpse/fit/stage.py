@@ -158,11 +158,9 @@ class Fitter:
         if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
             raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
                                f"{c.pose_prior_anneal} must have one value per full-stage step each")
-        if not c.scale_motion_rate_hz > 0:
-            raise GlimpseError(f"02_smpl_fit.scale_motion_rate_hz must be above 0 (Hz), found {c.scale_motion_rate_hz}")
-        if not c.pose_hypothesis_rate_hz > 0:
-            raise GlimpseError(f"02_smpl_fit.pose_hypothesis_rate_hz must be above 0 (Hz), "
-                               f"found {c.pose_hypothesis_rate_hz}")
+        for rate in ("scale_motion_rate_hz", "pose_hypothesis_rate_hz"):
+            if not getattr(c, rate) > 0:
+                raise GlimpseError(f"02_smpl_fit.{rate} must be above 0 (Hz), found {getattr(c, rate)}")
         if c.pose_hypotheses < 1:
             raise GlimpseError(f"02_smpl_fit.pose_hypotheses must be at least 1 (1: only the prior's mean), "
                                f"found {c.pose_hypotheses}")
