@@ -9,7 +9,9 @@ protocol) and the same restricted to the never-seen pixels, each beside the two 
 render, bodies in mean colour); per person inside their own masks; the full composite; and the
 hedgehog count (Gaussians with a largest scale above HEDGEHOG_SCALE_M, or a largest / middle
 scale above HEDGEHOG_RATIO) and each person's canonical holes (glimpse.eval.coverage). --pictures
-DIR saves each person's canonical turntable per prior.
+DIR saves each person's canonical turntable per prior. --placement-from-truth moves each fitted person by
+the one similarity that best aligns its joints to the truth before stage 03: the pose as fitted, the
+placement and size exact (a diagnostic: what a 2D fit's held-out loss owes to where it put people).
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, per prior, as a ratio to one forward+backward render of the same
@@ -18,7 +20,7 @@ the prior's share of an iteration is 1 - (ms per iteration with prior none) / (m
 
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
                                     [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
-                                    [--pictures DIR] [--keep DIR]
+                                    [--placement-from-truth] [--pictures DIR] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -34,14 +36,17 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
+from glimpse.body.params import read_body_params, write_body_params  # noqa: E402
 from glimpse.cameras.model import render_camera  # noqa: E402
 from glimpse.eval.coverage import CoverageConfig, canonical_hole_share  # noqa: E402
 from glimpse.eval.renders import canonical_turntable  # noqa: E402
+from glimpse.fit.evaluate import joint_errors, moved_onto_truth  # noqa: E402
 from glimpse.fixtures.scenes import make_scene  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
@@ -89,7 +94,8 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
 
 
 def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float | None, joint_params: str,
-              seed: int = SEED, priors: tuple[str, ...] = ("none",)) -> Iterator[tuple[str, Path]]:
+              seed: int = SEED, priors: tuple[str, ...] = ("none",),
+              placement_from_truth: bool = False) -> Iterator[tuple[str, Path]]:
     """Stages 01-05 on a fresh fixture scene, then 06-07 once per prior: yields (prior, run folder) after each
     (the next prior's stage 06 replaces the previous one's outputs)."""
     scene = make_scene(scenario, root / f"{scenario}_{size}_{fit}_{seed}", size, seed=seed)
@@ -97,12 +103,28 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
     params = f"{UPSTREAM_PARAMS} 02_smpl_fit.mode={fit}"
     params += f" 04_bg_pretrain.schedule_scale={bg_schedule}" if bg_schedule else ""
     for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"):
-        run(stage, scene, out, f"{params} {joint_params}")
+        stage_out = run(stage, scene, out, f"{params} {joint_params}")
+        if stage == "02_smpl_fit" and placement_from_truth:
+            place_as_truth(stage_out / "humans", scene.with_name(scene.name + ".groundtruth"))
     for prior in priors:
         kind, _, overrides = prior.partition("@")  # "surface@prior_surface.garments=false": a variant
         for stage in ("06_joint_opt", "07_eval"):
             run(stage, scene, out, f"{params} {joint_params} prior.kind={kind} {overrides.replace('@', ' ')}")
         yield prior, out / f"{scenario}_{size}"
+
+
+def place_as_truth(humans: Path, truth: Path) -> None:
+    """Move each person of stage 02's ``humans`` folder onto the fixture's ground truth in ``truth`` by one
+    similarity (glimpse.fit.evaluate.moved_onto_truth), and print it."""
+    model = BodyModel.from_file(BODY_MODEL, dtype=torch.float64)
+    for path in sorted(humans.glob("*/body.npz")):
+        fitted, true = read_body_params(path), dict(np.load(truth / f"{path.parent.name}_body.npz"))
+        moved, move = moved_onto_truth(model, fitted, true)
+        write_body_params(path, moved)
+        before, after = (joint_errors(model, params, true)["mpjpe_m"] for params in (fitted, moved))
+        print(f"placement from truth: {path.parent.name} scaled {move.scale:.4f}, turned "
+              f"{np.degrees(Rotation.from_matrix(move.rotation).magnitude()):.2f} deg, mean joint error "
+              f"{before * 100:.1f} -> {after * 100:.1f} cm", flush=True)
 
 
 def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
@@ -141,8 +163,9 @@ def turntables(people: list, picture: Path) -> None:
 
 
 def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str,
-            priors: tuple[str, ...], pictures: Path | None) -> None:
-    print(f"bodies fitted with 02_smpl_fit.mode={fit}; seed {seed}; stage 04 schedule_scale "
+            priors: tuple[str, ...], pictures: Path | None, placement_from_truth: bool = False) -> None:
+    moved = "; each moved onto the truth by one similarity (placement from truth)" if placement_from_truth else ""
+    print(f"bodies fitted with 02_smpl_fit.mode={fit}{moved}; seed {seed}; stage 04 schedule_scale "
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
     print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | seen PSNR | SSIM | LPIPS x100 | "
           "never-seen PSNR | SSIM | LPIPS x100 | per person PSNR (own mask) | composite PSNR | input-view PSNR, "
@@ -151,7 +174,8 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     baselines = []
     for scenario in scenarios:
-        for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors):
+        for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors,
+                                        placement_from_truth):
             metrics = read_json(run_dir / "07_eval" / "metrics.json")
             report = read_json(run_dir / "06_joint_opt" / "report.json")
             tables = metrics["tables"]
@@ -218,6 +242,8 @@ def main() -> int:
     parser.add_argument("--priors", default="none,surface",
                         help="stage 06's priors to compare, in order; KIND@KEY=VALUE[@KEY=VALUE] runs a prior with "
                              "parameter overrides (surface@prior_surface.garments=false)")
+    parser.add_argument("--placement-from-truth", action="store_true",
+                        help="move each fitted person onto the truth by one similarity before stage 03 (a diagnostic)")
     parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
@@ -233,7 +259,7 @@ def main() -> int:
         if args.quality:
             print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
             quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,
-                    priors, args.pictures)
+                    priors, args.pictures, args.placement_from_truth)
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
             speed(Path(tmp) / "speed", priors)

@@ -2,10 +2,12 @@
 synthetic keypoints of known bodies (3D, and 2D through known cameras)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
@@ -15,7 +17,7 @@ from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import body_joints, joint_errors
+from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride)
@@ -243,6 +245,30 @@ def _as_params(outcome, frame_ids):
 def _truth(params):
     return {"frame_ids": params.frame_ids, "betas": params.betas, "global_orient": params.global_orient,
             "body_pose": params.body_pose, "transl": params.transl}
+
+
+def test_a_body_moved_by_a_similarity_is_moved_back_onto_the_truth(model):
+    """The placement-from-truth diagnostic (bench/joint.py): a true body turned 7 degrees, 8% larger and shifted
+    comes back exactly, interpolated frames moved alike; a different pose keeps its pose error."""
+    truth = _known_person(model, 6)
+    turn = Rotation.from_euler("xyz", [2.0, 7.0, -1.0], degrees=True)
+    orient = (turn * Rotation.from_rotvec(truth.global_orient)).as_rotvec()
+    shift = np.array([0.4, -0.1, 0.9])
+    true_root = body_joints(model, truth.betas, truth.global_orient, truth.body_pose, truth.transl)[:, 0]
+    unmoved_root = body_joints(model, truth.betas, orient, truth.body_pose, np.zeros((6, 3)), 1.08)[:, 0]
+    interpolated = np.array([False, False, True, False, False, False])
+    placed = BodyParams(truth.frame_ids, truth.betas, orient, truth.body_pose,
+                        1.08 * turn.apply(true_root) + shift - unmoved_root, 1.08, "free", interpolated)
+    assert joint_errors(model, placed, _truth(truth))["mpjpe_m"] > 0.5
+    moved, move = moved_onto_truth(model, placed, _truth(truth))
+    assert move.scale == pytest.approx(1 / 1.08)
+    np.testing.assert_allclose(body_joints(model, moved.betas, moved.global_orient, moved.body_pose, moved.transl,
+                                           moved.scale),
+                               body_joints(model, truth.betas, truth.global_orient, truth.body_pose, truth.transl),
+                               atol=1e-9)
+    bent = replace(placed, body_pose=truth.body_pose + 0.1)
+    errors = joint_errors(model, moved_onto_truth(model, bent, _truth(truth))[0], _truth(truth))
+    assert errors["mpjpe_m"] == pytest.approx(errors["sequence_aligned_m"], rel=1e-6)
 
 
 def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):

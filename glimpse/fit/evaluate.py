@@ -9,12 +9,15 @@ error over the 24 body joints of the fitted (not interpolated) frames, three way
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
-from glimpse.cameras.align import umeyama
+from glimpse.cameras.align import Similarity, umeyama
 
 
 def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, body_pose: np.ndarray,
@@ -42,6 +45,23 @@ def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
             "sequence_aligned_m": float(np.linalg.norm(whole.apply(fit.reshape(-1, 3)) - true.reshape(-1, 3),
                                                        axis=1).mean()),
             "frame_aligned_m": float(np.mean(per_frame))}
+
+
+def moved_onto_truth(model: BodyModel, fitted: BodyParams,
+                     truth: dict[str, np.ndarray]) -> tuple[BodyParams, Similarity]:
+    """``fitted`` moved by the one similarity (rotation, translation, scale) that best aligns its joints in the
+    fitted (not interpolated) frames to the true ones (truth as in ``joint_errors``), every frame moved alike: its
+    placement and size made right, its pose kept. Returns (moved params, the similarity)."""
+    observed = ~fitted.interpolated
+    rows = np.searchsorted(truth["frame_ids"], fitted.frame_ids[observed])
+    joints = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)
+    true = body_joints(model, truth["betas"], truth["global_orient"][rows], truth["body_pose"][rows],
+                       truth["transl"][rows])
+    move = umeyama(joints[observed].reshape(-1, 3), true.reshape(-1, 3))
+    orient = (Rotation.from_matrix(move.rotation) * Rotation.from_rotvec(fitted.global_orient)).as_rotvec()
+    scale = fitted.scale * move.scale
+    unmoved_root = body_joints(model, fitted.betas, orient, fitted.body_pose, np.zeros_like(fitted.transl), scale)[:, 0]
+    return replace(fitted, global_orient=orient, transl=move.apply(joints[:, 0]) - unmoved_root, scale=scale), move
 
 
 def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
