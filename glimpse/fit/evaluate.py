@@ -29,18 +29,22 @@ def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, 
     return out.joints.numpy()
 
 
+def _true_joints(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> np.ndarray:
+    """[T, 24, 3] the true joints in ``fitted``'s fitted (not interpolated) frames (truth as in ``joint_errors``)."""
+    rows = np.searchsorted(truth["frame_ids"], fitted.frame_ids[~fitted.interpolated])
+    return body_joints(model, truth["betas"], truth["global_orient"][rows], truth["body_pose"][rows],
+                       truth["transl"][rows])
+
+
 def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> dict[str, float]:
     """truth: betas [10] and per-frame global_orient, body_pose, transl indexed by ``truth['frame_ids']``."""
     keep = ~fitted.interpolated
-    ids = fitted.frame_ids[keep]
-    rows = np.searchsorted(truth["frame_ids"], ids)
-    true = body_joints(model, truth["betas"], truth["global_orient"][rows], truth["body_pose"][rows],
-                       truth["transl"][rows])
+    true = _true_joints(model, fitted, truth)
     fit = body_joints(model, fitted.betas, fitted.global_orient[keep], fitted.body_pose[keep], fitted.transl[keep],
                       fitted.scale)
     whole = umeyama(fit.reshape(-1, 3), true.reshape(-1, 3))
     per_frame = [np.linalg.norm(umeyama(f, t).apply(f) - t, axis=1).mean() for f, t in zip(fit, true)]
-    return {"frames": int(len(ids)),
+    return {"frames": int(keep.sum()),
             "mpjpe_m": float(np.linalg.norm(fit - true, axis=-1).mean()),
             "sequence_aligned_m": float(np.linalg.norm(whole.apply(fit.reshape(-1, 3)) - true.reshape(-1, 3),
                                                        axis=1).mean()),
@@ -52,12 +56,8 @@ def moved_onto_truth(model: BodyModel, fitted: BodyParams,
     """``fitted`` moved by the one similarity (rotation, translation, scale) that best aligns its joints in the
     fitted (not interpolated) frames to the true ones (truth as in ``joint_errors``), every frame moved alike: its
     placement and size made right, its pose kept. Returns (moved params, the similarity)."""
-    observed = ~fitted.interpolated
-    rows = np.searchsorted(truth["frame_ids"], fitted.frame_ids[observed])
     joints = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)
-    true = body_joints(model, truth["betas"], truth["global_orient"][rows], truth["body_pose"][rows],
-                       truth["transl"][rows])
-    move = umeyama(joints[observed].reshape(-1, 3), true.reshape(-1, 3))
+    move = umeyama(joints[~fitted.interpolated].reshape(-1, 3), _true_joints(model, fitted, truth).reshape(-1, 3))
     orient = (Rotation.from_matrix(move.rotation) * Rotation.from_rotvec(fitted.global_orient)).as_rotvec()
     scale = fitted.scale * move.scale
     unmoved_root = body_joints(model, fitted.betas, orient, fitted.body_pose, np.zeros_like(fitted.transl), scale)[:, 0]
@@ -73,13 +73,10 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
     pelvis = {}
     for pid, params in fitted.items():
         keep = ~params.interpolated
-        ids = params.frame_ids[keep]
-        rows = np.searchsorted(truth[pid]["frame_ids"], ids)
-        t = truth[pid]
         ours = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
                            params.transl[keep], params.scale)[:, 0]
-        true = body_joints(model, t["betas"], t["global_orient"][rows], t["body_pose"][rows], t["transl"][rows])[:, 0]
-        pelvis[pid] = {int(f): (o, q) for f, o, q in zip(ids, ours, true)}
+        true = _true_joints(model, params, truth[pid])[:, 0]
+        pelvis[pid] = {int(f): (o, q) for f, o, q in zip(params.frame_ids[keep], ours, true)}
     distance_errors, agreements = [], []
     pids = sorted(pelvis)
     for a, pid in enumerate(pids):
