@@ -45,6 +45,7 @@ def _memory_kb(field: str) -> int:
 
 def measure(backend: str, count: int, size: int, backward: bool, device: str = "cpu", threads: int = 2) -> dict:
     """Runs in the subprocess: median seconds per call and peak extra memory (MB)."""
+    import glimpse  # noqa: F401  (first: it sets how OpenMP's idle threads wait before torch loads OpenMP, as in a run)
     import torch
 
     from glimpse.render import Camera, RenderConfig, rasterize

@@ -8,7 +8,7 @@ import torch
 
 from glimpse.render import Camera, RenderConfig, rasterize
 from glimpse.render.binning import bin_gaussians
-from glimpse.render.composite_cpu import available as cpu_available
+from glimpse.render.composite_cpu import available as cpu_available, composite_cpu
 from glimpse.render.composite_torch import composite_dense, composite_torch
 from glimpse.render.projection import LOW_PASS, project_gaussians, project_gaussians_cpu, quat_scale_to_covariance
 from glimpse.render.sh import C0
@@ -91,6 +91,33 @@ def test_cpu_backend_matches_the_torch_reference(kind, covariance_input, antiali
     for name in params:
         assert_grad_close(ref_grads[name], grads[name], name)
     assert torch.equal(out.radii, ref.radii)
+
+
+@needs_cpu_kernel
+def test_a_loss_on_colour_alone_gets_the_reference_gradients():
+    """The kernel's backward skips channels whose gradient is zero everywhere (here red and two extra channels, as
+    alpha and depth are when a loss reads colour alone): the gradients are still the reference's, and zero for
+    the skipped channels' features."""
+    params, cam = scene("random"), camera()
+    grads = {}
+    for backend in ("torch", "cpu"):
+        leaves = {k: v.clone().requires_grad_(True) for k, v in params.items()}
+        features = torch.cat([leaves["colors"], torch.rand(len(leaves["colors"]), 2).requires_grad_(True)], 1)
+        p = project_gaussians(leaves["means"], quat_scale_to_covariance(leaves["quats"], leaves["scales"]),
+                              leaves["opacities"], cam)
+        bins = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16)
+        if backend == "cpu":
+            image = composite_cpu(p.means2d, p.conics, p.opacities, features, p.extents, bins, cam.width, cam.height)
+        else:
+            image = composite_torch(p.means2d, p.conics, p.opacities, features, bins, cam.width, cam.height)
+        features.retain_grad()
+        (image[..., :3] * torch.linspace(0, 1, 3)).sum().backward()  # red's weight is 0: channels 1 and 2 active
+        grads[backend] = {**{k: v.grad for k, v in leaves.items()}, "extra features": features.grad[:, 3:]}
+    for name, reference in grads["torch"].items():
+        if name == "extra features":
+            assert torch.equal(grads["cpu"][name], torch.zeros_like(reference)) and not reference.any()
+        else:
+            assert_grad_close(reference, grads["cpu"][name], name)
 
 
 @needs_cpu_kernel

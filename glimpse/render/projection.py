@@ -182,28 +182,33 @@ class _ProjectCPU(torch.autograd.Function):
         inputs = [t.detach().float().contiguous() for t in (means, covariances, opacities)]
         geometry = (camera.K.cpu(), camera.R.cpu(), camera.t.cpu(), camera.width, camera.height, camera.near,
                     camera.far, antialiased)
-        means2d, conics, depths, opacities_out, cam, cov2d, valid = extension().project_forward(*inputs, *geometry)
+        means2d, conics, depths, opacities_out, cam, extents, radii, visible = extension().project_forward(
+            *inputs, *geometry)
         ctx.save_for_backward(*inputs, cam)
         ctx.geometry = geometry
-        ctx.mark_non_differentiable(cov2d, valid)
-        return means2d, conics, depths, opacities_out, cov2d, valid
+        ctx.mark_non_differentiable(extents, radii, visible)
+        ctx.set_materialize_grads(False)  # no zero gradients built for the screen boxes; the others filled below
+        return means2d, conics, depths, opacities_out, extents, radii, visible
 
     @staticmethod
-    def backward(ctx, v_means2d, v_conics, v_depths, v_opacities, _v_cov2d, _v_valid):
+    def backward(ctx, v_means2d, v_conics, v_depths, v_opacities, _v_extents, _v_radii, _v_visible):
         from glimpse.render.composite_cpu import extension
 
         means, covariances, opacities, cam = ctx.saved_tensors
-        grads = extension().project_backward(means, covariances, opacities, cam, *ctx.geometry, v_means2d.float(),
-                                             v_conics.float(), v_depths.float(), v_opacities.float())
+        n = len(means)
+        cotangents = [torch.zeros(shape, dtype=torch.float32) if v is None else v.float()
+                      for v, shape in ((v_means2d, (n, 2)), (v_conics, (n, 3)), (v_depths, (n,)), (v_opacities, (n,)))]
+        grads = extension().project_backward(means, covariances, opacities, cam, *ctx.geometry, *cotangents)
         return (*grads, None, None)
 
 
 def project_gaussians_cpu(means: Tensor, covariances: Tensor, opacities: Tensor, camera: Camera,
                           antialiased: bool = False) -> Projected:
-    """project_gaussians computed by the C++ kernel (float32); same outputs and gradients."""
-    means2d, conics, depths, opacities_out, cov2d, valid = _ProjectCPU.apply(means, covariances, opacities, camera,
-                                                                            antialiased)
-    return _finish_projection(means2d, conics, depths, opacities_out, cov2d, valid, camera)
+    """project_gaussians computed by the C++ kernel (float32), screen boxes included; same outputs and gradients."""
+    means2d, conics, depths, opacities_out, extents, radii, visible = _ProjectCPU.apply(
+        means, covariances, opacities, camera, antialiased)
+    return Projected(means2d=means2d, conics=conics, depths=depths, opacities=opacities_out, radii=radii,
+                     extents=extents, visible=visible)
 
 
 def fov_to_focal(fov_deg: float, pixels: int) -> float:

@@ -15,10 +15,11 @@
 // into masked stores, which AMD CPUs execute slowly and which stall the next Gaussian's loads of the
 // same pixels (no store forwarding); written this way the forward is about 1.2x faster. Each Gaussian's
 // inputs are first packed into one record (a cache line for up to 8 channels), fetched a few list entries
-// ahead. The backward walks each tile back to front the same way, keeps one running sum per channel and
+// ahead. A pixel that has stopped keeps its transmittance negated (one array, no separate live mask). The
+// backward walks each tile back to front the same way, keeps one running sum per channel and
 // pixel of the colour behind (gsplat's form of d pixel / d alpha), sums each Gaussian's gradients per lane
 // (one horizontal sum per Gaussian and tile), keeps per-thread gradient buffers (no atomics) and sums
-// them in parallel.
+// them in parallel. Channels whose gradient is zero at every pixel are left out of its walk.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 #include <omp.h>
@@ -222,6 +223,76 @@ inline Floats gaussian_alpha(const TileGaussian& t, Floats dx, float dy) {
   return power <= 0.0f ? alpha : 0.0f;
 }
 
+// The backward's walk of one tile, back to front, from its state (T: final transmittances; behind: zeros; dL_tile:
+// the image's gradient of the active channels), adding each Gaussian's gradients to `grads` [N, stride].
+// feature_lanes [A] and f_active [A]: scratch for one Gaussian's per-lane feature gradients and active features.
+void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last, const std::vector<int64_t>& active,
+                   float* __restrict T, const int* __restrict n_last, float* __restrict behind,
+                   const float* __restrict dL_tile, float* __restrict grads, int64_t stride,
+                   Floats* __restrict feature_lanes, float* __restrict f_active) {
+  const int64_t A = static_cast<int64_t>(active.size());
+  for (int e = start + max_last - 1; e >= start; --e) {  // back to front
+    const int g = in.ids[e];
+    if (e - kPrefetchAhead >= start) prefetch_record(in, in.ids[e - kPrefetchAhead]);
+    const TileGaussian tg = tile_gaussian(in, g, r.x0, r.x1, r.y0, r.y1);
+    const int index = e - start;
+    float* gg = grads + static_cast<int64_t>(g) * stride;
+    // its row of sums is read and written once the tile is walked: fetched now, the load has long arrived
+    __builtin_prefetch(gg, 1);
+    __builtin_prefetch(gg + stride - 1, 1);
+    bool touched = false;
+    // the gradients' lanes: mean x, y; conic a, b, c; opacity
+    Floats g_mx{}, g_my{}, g_a{}, g_b{}, g_c{}, g_o{};
+    std::fill(feature_lanes, feature_lanes + A, Floats{});
+    for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
+    for (int64_t y = tg.ya; y < tg.yb; ++y) {
+      const float dy = tg.my - static_cast<float>(y);
+      for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {
+        const int base = static_cast<int>(y - r.y0) * kTile + x8;
+        const Floats dx = tg.mx - static_cast<float>(r.x0 + x8) - kLaneOffsets;
+        const Floats power = gaussian_power(tg, dx, dy);
+        const Floats G = fast_exp(min(power, Floats{}));
+        const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
+        const Ints column = x8 + kLaneIndices;
+        const Ints hit = (column >= tg.xa) & (column < tg.xb) & (index < load(n_last + base)) &
+                         (power <= 0.0f) & (alpha >= kAlphaMin);
+        if (!any_lane(hit)) continue;  // nothing below changes where no lane is hit
+        touched = true;
+        // d pixel / d alpha_i = f_i T_i - B_i / (1 - alpha_i), B_i = sum over the contributors j behind i of
+        // f_j alpha_j T_j (gsplat's form): one running sum per channel and pixel
+        const Floats keep = 1.0f / (1.0f - alpha);
+        const Floats t_behind = load(T + base);
+        const Floats t = hit ? t_behind * keep : t_behind;  // transmittance in front of it
+        store(T + base, t);
+        const Floats w = hit ? alpha * t : 0.0f;
+        Floats d_alpha{};  // lanes not hit are masked off below (`free`)
+        for (int64_t i = 0; i < A; ++i) {
+          const float f = f_active[i];
+          float* bp = behind + i * kTilePixels + base;
+          const Floats dLp = load(dL_tile + i * kTilePixels + base), behind_now = load(bp);
+          feature_lanes[i] += w * dLp;
+          d_alpha += (f * t - behind_now * keep) * dLp;
+          store(bp, behind_now + f * w);  // w = 0 where not hit: unchanged
+        }
+        // a clamped alpha does not depend on o or the Gaussian
+        const Ints free = hit & (tg.o * G <= kAlphaMax);
+        const Floats d_power = free ? d_alpha * alpha : 0.0f;
+        g_mx += -(tg.a * dx + tg.b * dy) * d_power;
+        g_my += -(tg.b * dx + tg.c * dy) * d_power;
+        g_a += -0.5f * dx * dx * d_power;
+        g_b += -dx * dy * d_power;
+        g_c += -0.5f * dy * dy * d_power;
+        g_o += free ? G * d_alpha : 0.0f;
+      }
+    }
+    if (touched) {
+      const Floats geometry[6] = {g_mx, g_my, g_a, g_b, g_c, g_o};
+      for (int j = 0; j < 6; ++j) gg[j] += sum_lanes(geometry[j]);
+      for (int64_t i = 0; i < A; ++i) gg[6 + active[i]] += sum_lanes(feature_lanes[i]);
+    }
+  }
+}
+
 }  // namespace
 
 // Returns image [H, W, C], final transmittance [H, W], per pixel the number of list entries up to and
@@ -244,8 +315,9 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
 
 #pragma omp parallel num_threads(at::get_num_threads())
   {
-    // per-tile state, channel-major: acc[ch * kTilePixels + p]
-    alignas(64) float T[kTilePixels], live[kTilePixels];
+    // per-tile state, channel-major: acc[ch * kTilePixels + p]. T is the transmittance, negated once the pixel
+    // has stopped (a live pixel's is at least kTransmittanceMin > 0): one load and store instead of two arrays.
+    alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
     std::vector<float> acc_storage(C * kTilePixels);
     float* __restrict acc = acc_storage.data();
@@ -254,7 +326,6 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
     for (int64_t k = 0; k < tiles; ++k) {
       const TileRect r = tile_rect(in, k);
       std::fill(T, T + kTilePixels, 1.0f);
-      std::fill(live, live + kTilePixels, 1.0f);
       std::fill(n_last, n_last + kTilePixels, 0);
       std::fill(acc, acc + C * kTilePixels, 0.0f);
       int remaining = static_cast<int>((r.x1 - r.x0) * (r.y1 - r.y0));
@@ -270,19 +341,17 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
             const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
             const Floats dx = dx0 - kLaneOffsets, alpha = gaussian_alpha(tg, dx, dy);
             const Ints column = x8 + kLaneIndices;
-            const Floats t = load(T + base), live_now = load(live + base);
+            const Floats t = load(T + base);
             const Floats next = t * (1.0f - alpha);
-            const Ints hit = (column >= tg.xa) & (column < tg.xb) & (alpha >= kAlphaMin) & (live_now != 0.0f);
+            const Ints hit = (column >= tg.xa) & (column < tg.xb) & (alpha >= kAlphaMin) & (t > 0.0f);
             const Ints ends = hit & (next <= kTransmittanceMin);  // this pixel stops before this Gaussian
             const Ints adds = hit & ~ends;
             // whole vectors stored: a store of only some lanes compiles to a masked store, which is slow and
             // stalls the next Gaussian's loads of the same pixels (no store forwarding)
             const Floats w = adds ? alpha * t : 0.0f;
-            store(T + base, adds ? next : t);
-            store(live + base, ends ? 0.0f : live_now);
+            store(T + base, adds ? next : ends ? -t : t);
             const Ints n_now = load(n_last + base);
-            const Ints entry_if_added = adds & entry;
-            store(n_last + base, n_now > entry_if_added ? n_now : entry_if_added);  // entries only grow
+            store(n_last + base, adds ? Ints{} + entry : n_now);  // entries only grow: the latest added is the last
             const int stopped = count_lanes(ends);
             remaining -= stopped;
             for (int64_t ch = 0; ch < C; ++ch) {
@@ -297,7 +366,7 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
           const int p = static_cast<int>((y - r.y0) * kTile + (x - r.x0));
           const int64_t q = y * in.width + x;
           for (int64_t ch = 0; ch < C; ++ch) image_ptr[q * C + ch] = acc[ch * kTilePixels + p];
-          T_ptr[q] = T[p];
+          T_ptr[q] = std::fabs(T[p]);
           last_ptr[q] = n_last[p];
         }
       }
@@ -321,26 +390,40 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
   const int threads = at::get_num_threads();
   // per-thread gradient sums, each zeroed by its own thread (no serial fill), then summed in parallel
   auto buffers = torch::empty({threads, N, stride}, features.options());
-  auto total = torch::empty({N, stride}, features.options());
   float* buffer_ptr = buffers.data_ptr<float>();
-  float* total_ptr = total.data_ptr<float>();
+  // the sums go straight into the four gradients (no copies out of one [N, 6 + C] table)
+  auto v_means2d = torch::empty({N, 2}, features.options()), v_conics = torch::empty({N, 3}, features.options()),
+       v_opacities = torch::empty({N}, features.options()), v_features = torch::empty({N, C}, features.options());
+  float* const outputs[4] = {v_means2d.data_ptr<float>(), v_conics.data_ptr<float>(), v_opacities.data_ptr<float>(),
+                             v_features.data_ptr<float>()};
+  const int64_t output_width[4] = {2, 3, 1, C};
   const float* dL = grad_image.data_ptr<float>();
   const float* T_final = final_T.data_ptr<float>();
   const int* last_ptr = last.data_ptr<int>();
+  // Channels whose gradient is zero everywhere (a loss that reads colour only leaves alpha and depth so) change no
+  // gradient: the walk below skips them; their features' gradients stay 0.
+  std::vector<int64_t> active;
+  for (int64_t ch = 0; ch < C; ++ch) {
+    bool any = false;
+    for (int64_t q = 0; q < height * width && !any; ++q) any = dL[q * C + ch] != 0.0f;
+    if (any) active.push_back(ch);
+  }
+  const int64_t A = static_cast<int64_t>(active.size());
 
 #pragma omp parallel num_threads(threads)
   {
     const int team = omp_get_num_threads();  // may be fewer than asked (nested parallelism)
     float* grads = buffer_ptr + omp_get_thread_num() * N * stride;
     std::fill(grads, grads + N * stride, 0.0f);  // only this thread writes its sums until the tiles' loop ends
-    // per-tile state; per-channel arrays are channel-major ([ch * kTilePixels + p])
+    // per-tile state; per-channel arrays are channel-major over the active channels ([i * kTilePixels + p] for
+    // channel active[i])
     alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
-    std::vector<float> storage(2 * C * kTilePixels);
+    std::vector<float> storage(2 * A * kTilePixels);
     float* __restrict behind = storage.data();            // colour of the contributors behind: sum f_j alpha_j T_j
-    float* __restrict dL_tile = behind + C * kTilePixels;  // the image's gradient
-    // one Gaussian's feature gradients per lane, summed over lanes once per Gaussian and tile
-    std::vector<Floats> feature_lanes(C);
+    float* __restrict dL_tile = behind + A * kTilePixels;  // the image's gradient
+    std::vector<Floats> feature_lanes(A);
+    std::vector<float> f_active(A);
 // tiles dealt round-robin: balanced, and each thread's sums (hence the gradients) the same on every run
 #pragma omp for schedule(static, 1)
     for (int64_t k = 0; k < tiles; ++k) {
@@ -356,79 +439,26 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
           T[p] = T_final[q];
           n_last[p] = last_ptr[q];
           max_last = std::max(max_last, n_last[p]);
-          for (int64_t ch = 0; ch < C; ++ch) dL_tile[ch * kTilePixels + p] = dL[q * C + ch];
+          for (int64_t i = 0; i < A; ++i) dL_tile[i * kTilePixels + p] = dL[q * C + active[i]];
         }
       }
       const int start = in.offsets[k];
-      for (int e = start + max_last - 1; e >= start; --e) {  // back to front
-        const int g = in.ids[e];
-        if (e - kPrefetchAhead >= start) prefetch_record(in, in.ids[e - kPrefetchAhead]);
-        const TileGaussian tg = tile_gaussian(in, g, r.x0, r.x1, r.y0, r.y1);
-        const int index = e - start;
-        float* gg = grads + static_cast<int64_t>(g) * stride;
-        // its row of sums is read and written once the tile is walked: fetched now, the load has long arrived
-        __builtin_prefetch(gg, 1);
-        __builtin_prefetch(gg + stride - 1, 1);
-        bool touched = false;
-        // the gradients' lanes: mean x, y; conic a, b, c; opacity
-        Floats g_mx{}, g_my{}, g_a{}, g_b{}, g_c{}, g_o{};
-        std::fill(feature_lanes.begin(), feature_lanes.end(), Floats{});
-        for (int64_t y = tg.ya; y < tg.yb; ++y) {
-          const float dy = tg.my - static_cast<float>(y);
-          for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {
-            const int base = static_cast<int>(y - r.y0) * kTile + x8;
-            const Floats dx = tg.mx - static_cast<float>(r.x0 + x8) - kLaneOffsets;
-            const Floats power = gaussian_power(tg, dx, dy);
-            const Floats G = fast_exp(min(power, Floats{}));
-            const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
-            const Ints column = x8 + kLaneIndices;
-            const Ints hit = (column >= tg.xa) & (column < tg.xb) & (index < load(n_last + base)) &
-                             (power <= 0.0f) & (alpha >= kAlphaMin);
-            if (!any_lane(hit)) continue;  // nothing below changes where no lane is hit
-            touched = true;
-            // d pixel / d alpha_i = f_i T_i - B_i / (1 - alpha_i), B_i = sum over the contributors j behind i of
-            // f_j alpha_j T_j (gsplat's form): one running sum per channel and pixel
-            const Floats keep = 1.0f / (1.0f - alpha);
-            const Floats t_behind = load(T + base);
-            const Floats t = hit ? t_behind * keep : t_behind;  // transmittance in front of it
-            store(T + base, t);
-            const Floats w = hit ? alpha * t : 0.0f;
-            Floats d_alpha{};  // lanes not hit are masked off below (`free`)
-            for (int64_t ch = 0; ch < C; ++ch) {
-              const float f = tg.f[ch];
-              float* bp = behind + ch * kTilePixels + base;
-              const Floats dLp = load(dL_tile + ch * kTilePixels + base), behind_now = load(bp);
-              feature_lanes[ch] += w * dLp;
-              d_alpha += (f * t - behind_now * keep) * dLp;
-              store(bp, behind_now + f * w);  // w = 0 where not hit: unchanged
-            }
-            // a clamped alpha does not depend on o or the Gaussian
-            const Ints free = hit & (tg.o * G <= kAlphaMax);
-            const Floats d_power = free ? d_alpha * alpha : 0.0f;
-            g_mx += -(tg.a * dx + tg.b * dy) * d_power;
-            g_my += -(tg.b * dx + tg.c * dy) * d_power;
-            g_a += -0.5f * dx * dx * d_power;
-            g_b += -dx * dy * d_power;
-            g_c += -0.5f * dy * dy * d_power;
-            g_o += free ? G * d_alpha : 0.0f;
-          }
-        }
-        if (touched) {
-          const Floats geometry[6] = {g_mx, g_my, g_a, g_b, g_c, g_o};
-          for (int j = 0; j < 6; ++j) gg[j] += sum_lanes(geometry[j]);
-          for (int64_t ch = 0; ch < C; ++ch) gg[6 + ch] += sum_lanes(feature_lanes[ch]);
+      backward_tile(in, r, start, max_last, active, T, n_last, behind, dL_tile, grads, stride, feature_lanes.data(),
+                    f_active.data());
+    }
+#pragma omp for schedule(static)
+    for (int64_t g = 0; g < N; ++g) {
+      int64_t column = 0;
+      for (int o = 0; o < 4; ++o) {
+        for (int64_t j = 0; j < output_width[o]; ++j, ++column) {
+          float sum = 0.0f;
+          for (int t = 0; t < team; ++t) sum += buffer_ptr[(t * N + g) * stride + column];
+          outputs[o][g * output_width[o] + j] = sum;
         }
       }
     }
-#pragma omp for schedule(static)
-    for (int64_t j = 0; j < N * stride; ++j) {
-      float sum = 0.0f;
-      for (int t = 0; t < team; ++t) sum += buffer_ptr[t * N * stride + j];
-      total_ptr[j] = sum;
-    }
   }
-  return {total.slice(1, 0, 2).contiguous(), total.slice(1, 2, 5).contiguous(), total.select(1, 5).contiguous(),
-          total.slice(1, 6, 6 + C).contiguous()};
+  return {v_means2d, v_conics, v_opacities, v_features};
 }
 
 // Tile binning (the rules of glimpse/render/binning.py): the visible Gaussians, sorted front to back by

@@ -13,6 +13,9 @@ namespace {
 constexpr float kLowPass = 0.3f;
 constexpr float kDetFloor = 1e-12f;
 constexpr float kFovMargin = 0.3f;
+constexpr float kAlphaMin = 1.0f / 255.0f;  // projection.py ALPHA_MIN
+constexpr float kRadiusSigmas = 3.0f;       // projection.py RADIUS_SIGMAS
+constexpr float kExtentSafety = 1e-3f;      // projection.py EXTENT_SAFETY
 constexpr int64_t kGrain = 2048;
 
 struct CameraParams {
@@ -108,11 +111,34 @@ inline Footprint footprint(const CameraParams& c, const float* p, const float* S
   return f;
 }
 
+// Where a Gaussian is drawn (projection.py _finish_projection's rules): the half-extents of the box outside which
+// alpha = o exp(-s) < 1/255, its 3-sigma screen radius, and whether it is drawn at all (valid, alpha can reach
+// 1/255, the box meets the image). Zero extents and radius when not drawn.
+struct ScreenBox {
+  float extent_x, extent_y;
+  int radius;
+  bool visible;
+};
+
+inline ScreenBox screen_box(float mx, float my, float a, float b, float c, float opacity, bool valid, int64_t width,
+                            int64_t height) {
+  const float level = std::log(std::max(opacity / kAlphaMin, 1.0f));
+  // a, c > 0 for every positive-semidefinite covariance; where not, the reference's extents are NaN: not drawn
+  if (!valid || !(level > 0.0f) || !(a > 0.0f) || !(c > 0.0f)) return {0.0f, 0.0f, 0, false};
+  const float ex = std::sqrt(2.0f * level * a) * (1.0f + kExtentSafety);
+  const float ey = std::sqrt(2.0f * level * c) * (1.0f + kExtentSafety);
+  const bool on_image = mx + ex >= 0.0f && mx - ex <= static_cast<float>(width - 1) && my + ey >= 0.0f &&
+                        my - ey <= static_cast<float>(height - 1);
+  if (!on_image) return {0.0f, 0.0f, 0, false};
+  const float largest = 0.5f * (a + c) + std::sqrt(std::max(0.25f * ((a - c) * (a - c)) + b * b, 0.0f));
+  return {ex, ey, static_cast<int>(std::ceil(kRadiusSigmas * std::sqrt(largest))), true};
+}
+
 }  // namespace
 
 // means [N,3], covariances [N,3,3], opacities [N] (float32, contiguous) ->
 // means2d [N,2], conics [N,3], depths [N], opacities_out [N], camera-frame points [N,3] (for the backward),
-// dilated 2D covariances [N,3] (a, b, c) and a validity mask [N] (in depth range, positive determinant).
+// binning extents [N,2] (pixels), radii [N] int32 and a visibility mask [N] (ScreenBox).
 std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor covariances, torch::Tensor opacities,
                                            torch::Tensor K, torch::Tensor R, torch::Tensor t, int64_t width,
                                            int64_t height, double near, double far, bool antialiased) {
@@ -123,11 +149,14 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor co
   const CameraParams c = camera_params(K, R, t, width, height, near, far);
   const int64_t N = means.size(0);
   auto opts = means.options();
-  auto means2d = torch::zeros({N, 2}, opts), conics = torch::zeros({N, 3}, opts), depths = torch::empty({N}, opts);
-  auto opac_out = torch::zeros({N}, opts), cam = torch::empty({N, 3}, opts), cov2d = torch::zeros({N, 3}, opts);
-  auto valid_out = torch::zeros({N}, means.options().dtype(torch::kBool));
-  float* c2 = cov2d.data_ptr<float>();
-  bool* vv = valid_out.data_ptr<bool>();
+  // every output is written for every Gaussian below: no fill needed
+  auto means2d = torch::empty({N, 2}, opts), conics = torch::empty({N, 3}, opts), depths = torch::empty({N}, opts);
+  auto opac_out = torch::empty({N}, opts), cam = torch::empty({N, 3}, opts), extents = torch::empty({N, 2}, opts);
+  auto radii = torch::empty({N}, opts.dtype(torch::kInt32));
+  auto visible = torch::empty({N}, opts.dtype(torch::kBool));
+  float* ext = extents.data_ptr<float>();
+  int* rad = radii.data_ptr<int>();
+  bool* vis = visible.data_ptr<bool>();
   const float *m = means.data_ptr<float>(), *S = covariances.data_ptr<float>(), *o = opacities.data_ptr<float>();
   float *m2 = means2d.data_ptr<float>(), *cn = conics.data_ptr<float>(), *d = depths.data_ptr<float>(),
         *oo = opac_out.data_ptr<float>(), *pc = cam.data_ptr<float>();
@@ -141,10 +170,6 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor co
       const Footprint fp = footprint(c, p, S + 9 * i);
       const float a0 = fp.a0, b0 = fp.b0, c0 = fp.c0, a = fp.a, cc = fp.cc, det = fp.det, z = fp.z;
       const bool valid = fp.valid;
-      vv[i] = valid;
-      c2[3 * i] = a;
-      c2[3 * i + 1] = b0;
-      c2[3 * i + 2] = cc;
       const float det_safe = valid ? det : 1.0f;
       cn[3 * i] = cc / det_safe;
       cn[3 * i + 1] = -b0 / det_safe;
@@ -157,9 +182,14 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor co
         opacity *= std::sqrt(std::max(ratio, kDetFloor));
       }
       oo[i] = opacity;
+      const ScreenBox box = screen_box(m2[2 * i], m2[2 * i + 1], a, b0, cc, opacity, valid, width, height);
+      ext[2 * i] = box.extent_x;
+      ext[2 * i + 1] = box.extent_y;
+      rad[i] = box.radius;
+      vis[i] = box.visible;
     }
   });
-  return {means2d, conics, depths, opac_out, cam, cov2d, valid_out};
+  return {means2d, conics, depths, opac_out, cam, extents, radii, visible};
 }
 
 // Gradients of means [N,3], covariances [N,3,3] and opacities [N] from those of
@@ -175,8 +205,9 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor c
   v_conics = v_conics.contiguous();
   v_depths = v_depths.contiguous();
   v_opac_out = v_opac_out.contiguous();
-  auto v_means = torch::zeros({N, 3}, means.options()), v_cov = torch::zeros({N, 3, 3}, means.options()),
-       v_opac = torch::zeros({N}, means.options());
+  // every gradient is written for every Gaussian below: no fill needed
+  auto v_means = torch::empty({N, 3}, means.options()), v_cov = torch::empty({N, 3, 3}, means.options()),
+       v_opac = torch::empty({N}, means.options());
   const float *S = covariances.data_ptr<float>(), *o = opacities.data_ptr<float>(), *pc = cam.data_ptr<float>();
   const float *gm2 = v_means2d.data_ptr<float>(), *gcn = v_conics.data_ptr<float>(),
               *gd = v_depths.data_ptr<float>(), *go = v_opac_out.data_ptr<float>();
