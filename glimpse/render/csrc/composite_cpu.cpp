@@ -113,6 +113,21 @@ inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x
   return t;
 }
 
+// The lane groups of a Gaussian's box in a tile, walked as one flat loop: a tile row is two lane groups, so the
+// box covers one or two per row (`shift` 0 or 1), and step j is row ya + (j >> shift), group first + (j & shift).
+// One loop whose length is known when the Gaussian starts mispredicts once per Gaussian, where a loop over rows
+// and groups mispredicted about once per row, each time losing the work in flight behind it.
+struct BoxWalk {
+  int first, shift, steps;
+};
+static_assert(kTile == 2 * kLanes, "BoxWalk assumes two lane groups per tile row");
+
+inline BoxWalk box_walk(const TileGaussian& t) {
+  if (t.xb <= t.xa || t.yb <= t.ya) return {0, 0, 0};
+  const int first = t.xa / kLanes, shift = (t.xb - 1) / kLanes - first;
+  return {first * kLanes, shift, static_cast<int>(t.yb - t.ya) << shift};
+}
+
 // `records` [N, record_stride(C)]: the forward allocates it (64-byte aligned: torch's CPU allocator's alignment)
 // and packs it (pack_records); the backward is given the forward's.
 Inputs make_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& opacities,
@@ -240,50 +255,50 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
     // its row of sums is read and written once the tile is walked: fetched now, the load has long arrived
     __builtin_prefetch(gg, 1);
     __builtin_prefetch(gg + stride - 1, 1);
-    bool touched = false;
+    bool touched = false;  // whether any lane of the box is hit
     // the gradients' lanes: mean x, y; conic a, b, c; opacity
     Floats g_mx{}, g_my{}, g_a{}, g_b{}, g_c{}, g_o{};
     std::fill(feature_lanes, feature_lanes + A, Floats{});
     for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
-    for (int64_t y = tg.ya; y < tg.yb; ++y) {
+    const BoxWalk walk = box_walk(tg);
+    for (int j = 0; j < walk.steps; ++j) {
+      const int64_t y = tg.ya + (j >> walk.shift);
       const float dy = tg.my - static_cast<float>(y);
-      for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {
-        const int base = static_cast<int>(y - r.y0) * kTile + x8;
-        const Floats dx = tg.mx - static_cast<float>(r.x0 + x8) - kLaneOffsets;
-        const Floats power = gaussian_power(tg, dx, dy);
-        const Floats G = fast_exp(min(power, Floats{}));
-        const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
-        const Ints column = x8 + kLaneIndices;
-        const Ints hit = (column >= tg.xa) & (column < tg.xb) & (index < load(n_last + base)) &
-                         (power <= 0.0f) & (alpha >= kAlphaMin);
-        if (!any_lane(hit)) continue;  // nothing below changes where no lane is hit
-        touched = true;
-        // d pixel / d alpha_i = f_i T_i - B_i / (1 - alpha_i), B_i = sum over the contributors j behind i of
-        // f_j alpha_j T_j (gsplat's form): one running sum per channel and pixel
-        const Floats keep = 1.0f / (1.0f - alpha);
-        const Floats t_behind = load(T + base);
-        const Floats t = hit ? t_behind * keep : t_behind;  // transmittance in front of it
-        store(T + base, t);
-        const Floats w = hit ? alpha * t : 0.0f;
-        Floats d_alpha{};  // lanes not hit are masked off below (`free`)
-        for (int64_t i = 0; i < A; ++i) {
-          const float f = f_active[i];
-          float* bp = behind + i * kTilePixels + base;
-          const Floats dLp = load(dL_tile + i * kTilePixels + base), behind_now = load(bp);
-          feature_lanes[i] += w * dLp;
-          d_alpha += (f * t - behind_now * keep) * dLp;
-          store(bp, behind_now + f * w);  // w = 0 where not hit: unchanged
-        }
-        // a clamped alpha does not depend on o or the Gaussian
-        const Ints free = hit & (tg.o * G <= kAlphaMax);
-        const Floats d_power = free ? d_alpha * alpha : 0.0f;
-        g_mx += -(tg.a * dx + tg.b * dy) * d_power;
-        g_my += -(tg.b * dx + tg.c * dy) * d_power;
-        g_a += -0.5f * dx * dx * d_power;
-        g_b += -dx * dy * d_power;
-        g_c += -0.5f * dy * dy * d_power;
-        g_o += free ? G * d_alpha : 0.0f;
+      const int x8 = walk.first + (j & walk.shift) * kLanes;
+      const int base = static_cast<int>(y - r.y0) * kTile + x8;
+      const Floats dx = tg.mx - static_cast<float>(r.x0 + x8) - kLaneOffsets;
+      const Floats power = gaussian_power(tg, dx, dy);
+      const Floats G = fast_exp(min(power, Floats{}));
+      const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
+      const Ints column = x8 + kLaneIndices;
+      const Ints hit = (column >= tg.xa) & (column < tg.xb) & (index < load(n_last + base)) &
+                       (power <= 0.0f) & (alpha >= kAlphaMin);
+      touched |= any_lane(hit);  // no branch: skipping a group that no lane hits was a mispredicted branch
+      // d pixel / d alpha_i = f_i T_i - B_i / (1 - alpha_i), B_i = sum over the contributors j behind i of
+      // f_j alpha_j T_j (gsplat's form): one running sum per channel and pixel
+      const Floats keep = 1.0f / (1.0f - alpha);
+      const Floats t_behind = load(T + base);
+      const Floats t = hit ? t_behind * keep : t_behind;  // transmittance in front of it
+      store(T + base, t);
+      const Floats w = hit ? alpha * t : 0.0f;
+      Floats d_alpha{};  // lanes not hit are masked off below (`free`)
+      for (int64_t i = 0; i < A; ++i) {
+        const float f = f_active[i];
+        float* bp = behind + i * kTilePixels + base;
+        const Floats dLp = load(dL_tile + i * kTilePixels + base), behind_now = load(bp);
+        feature_lanes[i] += w * dLp;
+        d_alpha += (f * t - behind_now * keep) * dLp;
+        store(bp, behind_now + f * w);  // w = 0 where not hit: unchanged
       }
+      // a clamped alpha does not depend on o or the Gaussian
+      const Ints free = hit & (tg.o * G <= kAlphaMax);
+      const Floats d_power = free ? d_alpha * alpha : 0.0f;
+      g_mx += -(tg.a * dx + tg.b * dy) * d_power;
+      g_my += -(tg.b * dx + tg.c * dy) * d_power;
+      g_a += -0.5f * dx * dx * d_power;
+      g_b += -dx * dy * d_power;
+      g_c += -0.5f * dy * dy * d_power;
+      g_o += free ? G * d_alpha : 0.0f;
     }
     if (touched) {
       const Floats geometry[6] = {g_mx, g_my, g_a, g_b, g_c, g_o};
@@ -334,30 +349,31 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
         if (e + kPrefetchAhead < stop) prefetch_record(in, in.ids[e + kPrefetchAhead]);
         const TileGaussian tg = tile_gaussian(in, in.ids[e], r.x0, r.x1, r.y0, r.y1);
         const int entry = e - start + 1;
-        for (int64_t y = tg.ya; y < tg.yb; ++y) {
+        const BoxWalk walk = box_walk(tg);
+        for (int j = 0; j < walk.steps; ++j) {
+          const int64_t y = tg.ya + (j >> walk.shift);
           const float dy = tg.my - static_cast<float>(y);
-          for (int x8 = tg.xa / kLanes * kLanes; x8 < tg.xb; x8 += kLanes) {  // the lane groups the box covers
-            const int base = static_cast<int>(y - r.y0) * kTile + x8;
-            const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
-            const Floats dx = dx0 - kLaneOffsets, alpha = gaussian_alpha(tg, dx, dy);
-            const Ints column = x8 + kLaneIndices;
-            const Floats t = load(T + base);
-            const Floats next = t * (1.0f - alpha);
-            const Ints hit = (column >= tg.xa) & (column < tg.xb) & (alpha >= kAlphaMin) & (t > 0.0f);
-            const Ints ends = hit & (next <= kTransmittanceMin);  // this pixel stops before this Gaussian
-            const Ints adds = hit & ~ends;
-            // whole vectors stored: a store of only some lanes compiles to a masked store, which is slow and
-            // stalls the next Gaussian's loads of the same pixels (no store forwarding)
-            const Floats w = adds ? alpha * t : 0.0f;
-            store(T + base, adds ? next : ends ? -t : t);
-            const Ints n_now = load(n_last + base);
-            store(n_last + base, adds ? Ints{} + entry : n_now);  // entries only grow: the latest added is the last
-            const int stopped = count_lanes(ends);
-            remaining -= stopped;
-            for (int64_t ch = 0; ch < C; ++ch) {
-              float* out = acc + ch * kTilePixels + base;
-              store(out, load(out) + w * tg.f[ch]);
-            }
+          const int x8 = walk.first + (j & walk.shift) * kLanes;
+          const int base = static_cast<int>(y - r.y0) * kTile + x8;
+          const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
+          const Floats dx = dx0 - kLaneOffsets, alpha = gaussian_alpha(tg, dx, dy);
+          const Ints column = x8 + kLaneIndices;
+          const Floats t = load(T + base);
+          const Floats next = t * (1.0f - alpha);
+          const Ints hit = (column >= tg.xa) & (column < tg.xb) & (alpha >= kAlphaMin) & (t > 0.0f);
+          const Ints ends = hit & (next <= kTransmittanceMin);  // this pixel stops before this Gaussian
+          const Ints adds = hit & ~ends;
+          // whole vectors stored: a store of only some lanes compiles to a masked store, which is slow and
+          // stalls the next Gaussian's loads of the same pixels (no store forwarding)
+          const Floats w = adds ? alpha * t : 0.0f;
+          store(T + base, adds ? next : ends ? -t : t);
+          const Ints n_now = load(n_last + base);
+          store(n_last + base, adds ? Ints{} + entry : n_now);  // entries only grow: the latest added is the last
+          const int stopped = count_lanes(ends);
+          remaining -= stopped;
+          for (int64_t ch = 0; ch < C; ++ch) {
+            float* out = acc + ch * kTilePixels + base;
+            store(out, load(out) + w * tg.f[ch]);
           }
         }
       }
