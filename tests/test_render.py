@@ -94,6 +94,23 @@ def test_cpu_backend_matches_the_torch_reference(kind, covariance_input, antiali
 
 
 @needs_cpu_kernel
+def test_cpu_projection_backward_with_outputs_the_loss_does_not_read():
+    """A loss on the screen positions alone leaves the other outputs without a gradient (None in the backward):
+    the kernel's gradients are still the autograd projection's."""
+    params, cam = scene("random"), camera()
+    grads = []
+    for project in (project_gaussians, project_gaussians_cpu):
+        means = params["means"].clone().requires_grad_(True)
+        covariances = quat_scale_to_covariance(params["quats"], params["scales"]).detach().requires_grad_(True)
+        p = project(means, covariances, params["opacities"], cam)
+        (p.means2d[p.visible] * torch.tensor([1.0, -2.0])).sum().backward()
+        grads.append((means.grad, covariances.grad))
+    (ref_means, ref_cov), (means_g, cov_g) = grads
+    assert_grad_close(ref_means, means_g, "means")
+    assert all(g is None or not g.any() for g in (ref_cov, cov_g))  # screen positions do not depend on them
+
+
+@needs_cpu_kernel
 def test_a_loss_on_colour_alone_gets_the_reference_gradients():
     """The kernel's backward skips channels whose gradient is zero everywhere (here red and two extra channels, as
     alpha and depth are when a loss reads colour alone): the gradients are still the reference's, and zero for

@@ -196,7 +196,7 @@ class _ProjectCPU(torch.autograd.Function):
 
         means, covariances, opacities, cam = ctx.saved_tensors
         n = len(means)
-        cotangents = [torch.zeros(shape, dtype=torch.float32) if v is None else v.float()
+        cotangents = [means.new_zeros(shape) if v is None else v.float()
                       for v, shape in ((v_means2d, (n, 2)), (v_conics, (n, 3)), (v_depths, (n,)), (v_opacities, (n,)))]
         grads = extension().project_backward(means, covariances, opacities, cam, *ctx.geometry, *cotangents)
         return (*grads, None, None)

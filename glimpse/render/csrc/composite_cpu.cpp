@@ -114,7 +114,8 @@ inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x
 }
 
 // The lane groups of a Gaussian's box in a tile, walked as one flat loop: a tile row is two lane groups, so the
-// box covers one or two per row (`shift` 0 or 1), and step j is row ya + (j >> shift), group first + (j & shift).
+// box covers one or two per row (`shift` 0 or 1), and step j is row ya + (j >> shift), columns from
+// first + kLanes (j & shift).
 // One loop whose length is known when the Gaussian starts mispredicts once per Gaussian, where a loop over rows
 // and groups mispredicted about once per row, each time losing the work in flight behind it.
 struct BoxWalk {
@@ -331,7 +332,7 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
 #pragma omp parallel num_threads(at::get_num_threads())
   {
     // per-tile state, channel-major: acc[ch * kTilePixels + p]. T is the transmittance, negated once the pixel
-    // has stopped (a live pixel's is at least kTransmittanceMin > 0): one load and store instead of two arrays.
+    // has stopped (a live pixel's is above kTransmittanceMin > 0): one load and store instead of two arrays.
     alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
     std::vector<float> acc_storage(C * kTilePixels);
