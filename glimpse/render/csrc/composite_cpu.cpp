@@ -226,6 +226,21 @@ inline Floats fast_exp(Floats x) {
   return p * scale;
 }
 
+// Step j of a BoxWalk in the tile whose first pixel is (x0, y0): dy = mean_y - the row's y, the lane group's first
+// column x8 (tile-relative), the group's offset in the per-tile arrays, and dx = mean_x - pixel_x on every lane.
+struct BoxStep {
+  float dy;
+  int x8, base;
+  Floats dx;
+};
+
+inline BoxStep box_step(const BoxWalk& walk, const TileGaussian& t, int64_t x0, int64_t y0, int j) {
+  const int64_t y = t.ya + (j >> walk.shift);
+  const int x8 = walk.first + (j & walk.shift) * kLanes;
+  return {t.my - static_cast<float>(y), x8, static_cast<int>(y - y0) * kTile + x8,
+          t.mx - static_cast<float>(x0 + x8) - kLaneOffsets};
+}
+
 // The Gaussian's exponent -0.5 (a dx^2 + c dy^2) - b dx dy at dx = mean_x - pixel_x, dy = mean_y - pixel_y.
 inline Floats gaussian_power(const TileGaussian& t, Floats dx, float dy) {
   return -0.5f * (t.a * dx * dx + t.c * dy * dy) - t.b * dx * dy;
@@ -263,11 +278,7 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
     for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
     const BoxWalk walk = box_walk(tg);
     for (int j = 0; j < walk.steps; ++j) {
-      const int64_t y = tg.ya + (j >> walk.shift);
-      const float dy = tg.my - static_cast<float>(y);
-      const int x8 = walk.first + (j & walk.shift) * kLanes;
-      const int base = static_cast<int>(y - r.y0) * kTile + x8;
-      const Floats dx = tg.mx - static_cast<float>(r.x0 + x8) - kLaneOffsets;
+      const auto [dy, x8, base, dx] = box_step(walk, tg, r.x0, r.y0, j);
       const Floats power = gaussian_power(tg, dx, dy);
       const Floats G = fast_exp(min(power, Floats{}));
       const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
@@ -352,12 +363,8 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
         const int entry = e - start + 1;
         const BoxWalk walk = box_walk(tg);
         for (int j = 0; j < walk.steps; ++j) {
-          const int64_t y = tg.ya + (j >> walk.shift);
-          const float dy = tg.my - static_cast<float>(y);
-          const int x8 = walk.first + (j & walk.shift) * kLanes;
-          const int base = static_cast<int>(y - r.y0) * kTile + x8;
-          const float dx0 = tg.mx - static_cast<float>(r.x0 + x8);
-          const Floats dx = dx0 - kLaneOffsets, alpha = gaussian_alpha(tg, dx, dy);
+          const auto [dy, x8, base, dx] = box_step(walk, tg, r.x0, r.y0, j);
+          const Floats alpha = gaussian_alpha(tg, dx, dy);
           const Ints column = x8 + kLaneIndices;
           const Floats t = load(T + base);
           const Floats next = t * (1.0f - alpha);
