@@ -9,7 +9,8 @@
 // finished its share); the backward deals them round-robin, so that its per-thread sums are the same
 // on every run. Within a tile, Gaussians are taken one by one (outer loop); each row of the
 // Gaussian's box is computed in groups of 8 pixels as one vector (GCC's vector extensions: one AVX2
-// register, a fixed width, no scalar epilogue), pixels outside the box masked off, branch-free. Per-tile
+// register, a fixed width, no scalar epilogue), pixels outside the box masked off, branch-free, and
+// only the groups that the row's ellipse reaches are walked (reach_steps, worked out one Gaussian ahead). Per-tile
 // state is stored channel-major, so every channel is one more vector. Every store writes a whole vector
 // (the old value where a pixel is not hit): the loops GCC vectorised itself turned the state updates
 // into masked stores, which AMD CPUs execute slowly and which stall the next Gaussian's loads of the
@@ -93,10 +94,10 @@ inline void box_range(float centre, float extent, int64_t start, int64_t stop, i
   hi = std::min<int64_t>(stop, static_cast<int64_t>(std::floor(centre + extent)) + 1);
 }
 
-// One Gaussian as a tile sees it: its parameters and its box clipped to the tile, as tile-relative
-// columns [xa, xb) and image rows [ya, yb).
+// One Gaussian as a tile sees it: its parameters, its box's half-height `ey` and its box clipped to the tile, as
+// tile-relative columns [xa, xb) and image rows [ya, yb).
 struct TileGaussian {
-  float mx, my, a, b, c, o;
+  float mx, my, a, b, c, o, ey;
   const float* f;
   int xa, xb;
   int64_t ya, yb;
@@ -104,29 +105,13 @@ struct TileGaussian {
 
 inline TileGaussian tile_gaussian(const Inputs& in, int g, int64_t x0, int64_t x1, int64_t y0, int64_t y1) {
   const float* rec = in.records + static_cast<int64_t>(g) * in.record_stride;
-  TileGaussian t{rec[0], rec[1], rec[2], rec[3], rec[4], rec[5], rec + kRecordHeader, 0, 0, 0, 0};
+  TileGaussian t{rec[0], rec[1], rec[2], rec[3], rec[4], rec[5], rec[7], rec + kRecordHeader, 0, 0, 0, 0};
   int64_t xa, xb;
   box_range(t.mx, rec[6], x0, x1, xa, xb);
-  box_range(t.my, rec[7], y0, y1, t.ya, t.yb);
+  box_range(t.my, t.ey, y0, y1, t.ya, t.yb);
   t.xa = static_cast<int>(xa - x0);
   t.xb = static_cast<int>(xb - x0);
   return t;
-}
-
-// The lane groups of a Gaussian's box in a tile, walked as one flat loop: a tile row is two lane groups, so the
-// box covers one or two per row (`shift` 0 or 1), and step j is row ya + (j >> shift), columns from
-// first + kLanes (j & shift).
-// One loop whose length is known when the Gaussian starts mispredicts once per Gaussian, where a loop over rows
-// and groups mispredicted about once per row, each time losing the work in flight behind it.
-struct BoxWalk {
-  int first, shift, steps;
-};
-static_assert(kTile == 2 * kLanes, "BoxWalk assumes two lane groups per tile row");
-
-inline BoxWalk box_walk(const TileGaussian& t) {
-  if (t.xb <= t.xa || t.yb <= t.ya) return {0, 0, 0};
-  const int first = t.xa / kLanes, shift = (t.xb - 1) / kLanes - first;
-  return {first * kLanes, shift, static_cast<int>(t.yb - t.ya) << shift};
 }
 
 // `records` [N, record_stride(C)]: the forward allocates it (64-byte aligned: torch's CPU allocator's alignment)
@@ -226,21 +211,6 @@ inline Floats fast_exp(Floats x) {
   return p * scale;
 }
 
-// Step j of a BoxWalk in the tile whose first pixel is (x0, y0): dy = mean_y - the row's y, the lane group's first
-// column x8 (tile-relative), the group's offset in the per-tile arrays, and dx = mean_x - pixel_x on every lane.
-struct BoxStep {
-  float dy;
-  int x8, base;
-  Floats dx;
-};
-
-inline BoxStep box_step(const BoxWalk& walk, const TileGaussian& t, int64_t x0, int64_t y0, int j) {
-  const int64_t y = t.ya + (j >> walk.shift);
-  const int x8 = walk.first + (j & walk.shift) * kLanes;
-  return {t.my - static_cast<float>(y), x8, static_cast<int>(y - y0) * kTile + x8,
-          t.mx - static_cast<float>(x0 + x8) - kLaneOffsets};
-}
-
 // The Gaussian's exponent -0.5 (a dx^2 + c dy^2) - b dx dy at dx = mean_x - pixel_x, dy = mean_y - pixel_y.
 inline Floats gaussian_power(const TileGaussian& t, Floats dx, float dy) {
   return -0.5f * (t.a * dx * dx + t.c * dy * dy) - t.b * dx * dy;
@@ -254,6 +224,84 @@ inline Floats gaussian_alpha(const TileGaussian& t, Floats dx, float dy) {
   return power <= 0.0f ? alpha : 0.0f;
 }
 
+// The steps of a Gaussian's walk through a tile: bit 2 row + g for each tile row `row` (0-15) and lane group g
+// (columns 8g to 8g + 7) that holds a pixel of its box where alpha can reach 1/255. Every other lane group of the box
+// would be computed for nothing: a quarter of them on a trained scene, a sixth on bench/raster.py's random one.
+// That region is the ellipse 0.5 d^T Q d <= L, Q = [[a, b], [b, c]] the conic, L = ln(o / (1/255)), and the box's
+// half-height is ey = sqrt(2 L a / q) (q = ac - b^2; the projection's, 1e-3 wider), so row y of it spans
+//     x = mean_x + (b dy -+ sqrt(q (ey^2 - dy^2))) / a,   dy = mean_y - y,
+// from the box alone (no logarithm); the widened ey and kSpanMargin keep every pixel the lanes' own test accepts.
+// Bits go in row-major order, so the steps run in the order of a walk over the whole box.
+constexpr float kSpanMargin = 0.01f;  // pixels added to each side of a row's span (rounding)
+
+inline uint32_t spread_bits(uint32_t x) {  // bit i of a 16-bit x to bit 2i
+  x = (x | (x << 8)) & 0x00FF00FFu;
+  x = (x | (x << 4)) & 0x0F0F0F0Fu;
+  x = (x | (x << 2)) & 0x33333333u;
+  return (x | (x << 1)) & 0x55555555u;
+}
+
+inline Floats sqrt_lanes(Floats v) {
+#ifdef __AVX__
+  return reinterpret_cast<Floats>(_mm256_sqrt_ps(reinterpret_cast<__m256>(v)));
+#else
+  for (int i = 0; i < kLanes; ++i) v[i] = std::sqrt(v[i]);
+  return v;
+#endif
+}
+
+inline uint32_t reach_steps(const TileGaussian& t, int64_t x0, int64_t y0) {
+  const float q = t.a * t.c - t.b * t.b;
+  const bool spans = q > 0.0f && t.a > 0.0f;  // else (a degenerate conic) every row of the box is walked whole
+  const float inv_a = 1.0f / t.a, slope = t.b * inv_a, cx = t.mx - static_cast<float>(x0),
+              cy = t.my - static_cast<float>(y0), ey2 = t.ey * t.ey;
+  const float first_row = static_cast<float>(t.ya - y0), end_row = static_cast<float>(t.yb - y0);
+  uint32_t groups[2] = {0, 0};  // per lane group: bit `row`
+  for (int half = 0; half < 2; ++half) {  // rows 0-7, then 8-15
+    const Floats row = kLaneOffsets + static_cast<float>(half * kLanes);
+    const Floats dy = cy - row;
+    const Floats room = q * (ey2 - dy * dy);
+    const Floats width = sqrt_lanes(max(room, Floats{})) * inv_a + kSpanMargin;
+    const Floats lo = cx + slope * dy - width, hi = lo + 2.0f * width;
+    const Ints rows = (row >= first_row) & (row < end_row);
+    for (int g = 0; g < 2; ++g) {
+      const float column = static_cast<float>(g * kLanes);  // the group's first column
+      const Ints reach = spans ? rows & (room >= 0.0f) & (lo <= column + (kLanes - 1)) & (hi >= column) : rows;
+      groups[g] |= static_cast<uint32_t>(lane_bits(reach)) << (half * kLanes);
+    }
+  }
+  for (int g = 0; g < 2; ++g)  // the box's columns must meet the group's
+    if (t.xa >= (g + 1) * kLanes || t.xb <= g * kLanes) groups[g] = 0;
+  return spread_bits(groups[0]) | (spread_bits(groups[1]) << 1);
+}
+static_assert(kTile == 2 * kLanes, "reach_steps assumes two lane groups per tile row");
+
+// A list entry of a tile: the Gaussian and the steps of its walk. The walks work out the next entry's before they
+// walk the current one, so that its latency (a division, square roots, the bits' shuffle) overlaps that walk.
+struct TileEntry {
+  TileGaussian g;
+  uint32_t steps;
+};
+
+inline TileEntry tile_entry(const Inputs& in, int g, const TileRect& r) {
+  const TileGaussian t = tile_gaussian(in, g, r.x0, r.x1, r.y0, r.y1);
+  return {t, reach_steps(t, r.x0, r.y0)};
+}
+
+// Step j (bit j of reach_steps) in the tile whose first pixel is (x0, y0): dy = mean_y - the row's y, the lane
+// group's first column x8 (tile-relative), the group's offset in the per-tile arrays, and dx = mean_x - pixel_x on
+// every lane.
+struct BoxStep {
+  float dy;
+  int x8, base;
+  Floats dx;
+};
+
+inline BoxStep box_step(const TileGaussian& t, int64_t x0, int64_t y0, int j) {
+  const int x8 = (j & 1) * kLanes;
+  return {t.my - static_cast<float>(y0 + (j >> 1)), x8, j * kLanes, t.mx - static_cast<float>(x0 + x8) - kLaneOffsets};
+}
+
 // The backward's walk of one tile, back to front, from its state (T: final transmittances; behind: zeros; dL_tile:
 // the image's gradient of the active channels), adding each Gaussian's gradients to `grads` [N, stride].
 // feature_lanes [A] and f_active [A]: scratch for one Gaussian's per-lane feature gradients and active features.
@@ -262,10 +310,13 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
                    const float* __restrict dL_tile, float* __restrict grads, int64_t stride,
                    Floats* __restrict feature_lanes, float* __restrict f_active) {
   const int64_t A = static_cast<int64_t>(active.size());
+  TileEntry next = max_last > 0 ? tile_entry(in, in.ids[start + max_last - 1], r) : TileEntry{};
   for (int e = start + max_last - 1; e >= start; --e) {  // back to front
     const int g = in.ids[e];
     if (e - kPrefetchAhead >= start) prefetch_record(in, in.ids[e - kPrefetchAhead]);
-    const TileGaussian tg = tile_gaussian(in, g, r.x0, r.x1, r.y0, r.y1);
+    const TileEntry now = next;
+    if (e > start) next = tile_entry(in, in.ids[e - 1], r);
+    const TileGaussian& tg = now.g;
     const int index = e - start;
     float* gg = grads + static_cast<int64_t>(g) * stride;
     // its row of sums is read and written once the tile is walked: fetched now, the load has long arrived
@@ -276,9 +327,8 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
     Floats g_mx{}, g_my{}, g_a{}, g_b{}, g_c{}, g_o{};
     std::fill(feature_lanes, feature_lanes + A, Floats{});
     for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
-    const BoxWalk walk = box_walk(tg);
-    for (int j = 0; j < walk.steps; ++j) {
-      const auto [dy, x8, base, dx] = box_step(walk, tg, r.x0, r.y0, j);
+    for (uint32_t steps = now.steps; steps != 0; steps &= steps - 1) {
+      const auto [dy, x8, base, dx] = box_step(tg, r.x0, r.y0, __builtin_ctz(steps));
       const Floats power = gaussian_power(tg, dx, dy);
       const Floats G = fast_exp(min(power, Floats{}));
       const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
@@ -357,13 +407,15 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
       std::fill(acc, acc + C * kTilePixels, 0.0f);
       int remaining = static_cast<int>((r.x1 - r.x0) * (r.y1 - r.y0));
       const int start = in.offsets[k], stop = in.offsets[k + 1];
+      TileEntry next = start < stop ? tile_entry(in, in.ids[start], r) : TileEntry{};
       for (int e = start; e < stop && remaining > 0; ++e) {
         if (e + kPrefetchAhead < stop) prefetch_record(in, in.ids[e + kPrefetchAhead]);
-        const TileGaussian tg = tile_gaussian(in, in.ids[e], r.x0, r.x1, r.y0, r.y1);
+        const TileEntry now = next;
+        if (e + 1 < stop) next = tile_entry(in, in.ids[e + 1], r);
+        const TileGaussian& tg = now.g;
         const int entry = e - start + 1;
-        const BoxWalk walk = box_walk(tg);
-        for (int j = 0; j < walk.steps; ++j) {
-          const auto [dy, x8, base, dx] = box_step(walk, tg, r.x0, r.y0, j);
+        for (uint32_t steps = now.steps; steps != 0; steps &= steps - 1) {
+          const auto [dy, x8, base, dx] = box_step(tg, r.x0, r.y0, __builtin_ctz(steps));
           const Floats alpha = gaussian_alpha(tg, dx, dy);
           const Ints column = x8 + kLaneIndices;
           const Floats t = load(T + base);
