@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from glimpse.metrics.image import ssim_map
+from glimpse.metrics.image import ssim, ssim_map
 from glimpse.metrics.losses import dssim_loss, dssim_loss_on
-from glimpse.metrics.ssim_cpu import _SsimMap, fused_ssim_applies
+from glimpse.metrics.ssim_cpu import _SsimMap, fused_ssim_applies, ssim_fused
 from glimpse.render.composite_cpu import available
 
 pytestmark = pytest.mark.skipif(not available(), reason="the C++ kernels do not build here")
@@ -72,3 +72,13 @@ def test_falls_back_where_it_does_not_apply() -> None:
     assert not fused_ssim_applies(pred, target)
     dssim_loss(pred, target).backward()
     assert target.grad is not None and target.grad.abs().sum() > 0
+
+
+def test_the_metrics_ssim_is_the_pytorch_value_with_and_without_a_mask() -> None:
+    """The tables score SSIM from the fused map (ssim_fused): the same values as glimpse.metrics.image.ssim, which
+    tests/test_metrics.py holds to scikit-image."""
+    pred, target = images((2, 45, 61, 3), seed=8)
+    mask = torch.rand(2, 45, 61, generator=torch.Generator().manual_seed(9)) > 0.6
+    assert fused_ssim_applies(pred, target)
+    for region in (None, mask):
+        torch.testing.assert_close(ssim_fused(pred, target, region), ssim(pred, target, region), rtol=0, atol=1e-6)

@@ -146,10 +146,15 @@ def ssim(
     ``return_map=True`` also returns the full map ``[..., H, W, C]``.
     """
     full = ssim_map(pred, target)
+    value = ssim_of_map(full, mask)
+    return (value, full) if return_map else value
+
+
+def ssim_of_map(full: Tensor, mask: Tensor | None = None) -> Tensor:
+    """``ssim``'s value from the full map ``[..., H, W, C]``: without a mask, its mean less a 5-pixel border; with
+    ``mask [..., H, W]``, its mean over the masked pixels and channels."""
     if mask is None:
         r = SSIM_RADIUS
-        value = full[..., r:-r, r:-r, :].mean(dim=(-3, -2, -1))
-    else:
-        value = masked_mean(full, mask)
-    return (value, full) if return_map else value
+        return full[..., r:-r, r:-r, :].mean(dim=(-3, -2, -1))
+    return masked_mean(full, mask)
 

@@ -222,10 +222,12 @@ class LPIPS(nn.Module):
         return distances
 
     def _distance(self, pairs: list[tuple[Tensor, Tensor]]) -> Tensor:
-        """``[B]`` from the tapped unit features of both images per layer."""
+        """``[B]`` from the tapped unit features of both images per layer: each layer's linear head (a 1x1 convolution
+        to one channel) averaged over the map, computed as the head's weights times the channels' means (the same
+        sum, both linear; a 1x1 convolution's own path on a CPU copies the whole map first)."""
         distance = pairs[0][0].new_zeros(pairs[0][0].shape[0])
         for head, (feats_pred, feats_target) in zip(self.heads, pairs, strict=True):
-            distance = distance + head((feats_pred - feats_target) ** 2).mean(dim=(1, 2, 3))
+            distance = distance + ((feats_pred - feats_target) ** 2).mean(dim=(2, 3)) @ head.weight.view(-1)
         return distance
 
     def _unit_features(self, images: Tensor) -> list[Tensor]:

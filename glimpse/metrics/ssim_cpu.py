@@ -3,8 +3,9 @@
 PyTorch builds the map from about fifty whole-image operations forward and backward (five moment maps
 concatenated and padded, two blurs, a dozen element-wise products); on a 320x240 frame they cost a stage-04
 iteration about a fifth of its time. ``glimpse/render/csrc/ssim_cpu.cpp`` computes the same map and its gradient
-with respect to the first image in a few passes. The metrics keep the PyTorch form (it is what the tests
-compare with scikit-image); ``tests/test_ssim_cpu.py`` compares the two forms, values and gradients.
+with respect to the first image in a few passes; the metrics tables take their maps from it too (stage 07 scores
+fourteen of them per held-out view). ``tests/test_metrics.py`` compares the PyTorch form with scikit-image, and
+``tests/test_ssim_cpu.py`` the two forms, values and gradients.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from glimpse.metrics.image import SSIM_C1, SSIM_C2, SSIM_WIN_SIZE, gaussian_window_1d, ssim_map
+from glimpse.metrics.image import SSIM_C1, SSIM_C2, SSIM_WIN_SIZE, gaussian_window_1d, ssim_map, ssim_of_map
 from glimpse.render.composite_cpu import extension, kernel_applies
 
 
@@ -43,3 +44,9 @@ def fused_ssim_applies(pred: Tensor, target: Tensor) -> bool:
 def ssim_map_for_loss(pred: Tensor, target: Tensor) -> Tensor:
     """``ssim_map(pred, target)``, by the fused C++ kernel where it applies, else by PyTorch."""
     return _SsimMap.apply(pred, target) if fused_ssim_applies(pred, target) else ssim_map(pred, target)
+
+
+@torch.no_grad()
+def ssim_fused(pred: Tensor, target: Tensor, mask: Tensor | None = None) -> Tensor:
+    """``glimpse.metrics.image.ssim(pred, target, mask)``, its map by the fused C++ kernel where it applies."""
+    return ssim_of_map(ssim_map_for_loss(pred, target), mask)

@@ -16,8 +16,9 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from glimpse.metrics.image import DATA_RANGE, SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WIN_SIZE, psnr, ssim
+from glimpse.metrics.image import DATA_RANGE, SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WIN_SIZE, psnr
 from glimpse.metrics.lpips import LPIPS, LPIPS_REPORT_SCALE, LpipsNet
+from glimpse.metrics.ssim_cpu import ssim_fused
 
 TABLE_FORMAT = "glimpse-metrics/1"
 PSNR_DEFINITION = (
@@ -92,7 +93,7 @@ def frame_metrics_against(
     else:
         weights = mask.to(target.dtype).unsqueeze(-1)
         lpips_values = lpips_module.distances_to([pred * weights for pred in preds], target * weights)
-    return [FrameMetrics(frame=frame, psnr=float(psnr(pred, target, mask)), ssim=float(ssim(pred, target, mask)),
+    return [FrameMetrics(frame=frame, psnr=float(psnr(pred, target, mask)), ssim=float(ssim_fused(pred, target, mask)),
                          lpips=float(lpips_value)) for pred, lpips_value in zip(preds, lpips_values, strict=True)]
 
 
