@@ -36,6 +36,9 @@ __all__ = [
 
 FRAME_ID_DIGITS = 6
 FRAME_ID_MAX = 10**FRAME_ID_DIGITS - 1
+# zlib level of every PNG written (lossless at any level): 1 encodes a 320x240 frame in 10 ms against 15 ms at
+# Pillow's default 6, for a file 6% larger; a run writes thousands (frames, masks, crops, renders)
+PNG_COMPRESS_LEVEL = 1
 _FRAME_NAME = re.compile(r"[0-9]{6}")
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 #: PNG colour types whose IHDR bit depth is the depth of one sample.
@@ -160,7 +163,7 @@ def write_png(path: str | Path, array: np.ndarray) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with staged_file(path) as tmp, tmp.open("xb") as handle:
-        Image.fromarray(np.ascontiguousarray(array)).save(handle, format="PNG")
+        Image.fromarray(np.ascontiguousarray(array)).save(handle, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
 
 
 def frame_name(frame_id: int) -> str:
