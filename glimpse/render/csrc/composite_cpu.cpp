@@ -233,6 +233,9 @@ inline Floats gaussian_alpha(const TileGaussian& t, Floats dx, float dy) {
 // from the box alone (no logarithm); the widened ey and kSpanMargin keep every pixel the lanes' own test accepts.
 // Bits go in row-major order, so the steps run in the order of a walk over the whole box.
 constexpr float kSpanMargin = 0.01f;  // pixels added to each side of a row's span (rounding)
+// smallest q / (ac) whose spans are computed (1 - q / (ac) = b^2 / (ac)): below it, float32's cancellation in q could
+// shrink a span by more than the extents' 1e-3 slack covers (seen from q / (ac) of about 1e-5 on)
+constexpr float kWellConditioned = 1e-4f;
 
 inline uint32_t spread_bits(uint32_t x) {  // bit i of a 16-bit x to bit 2i
   x = (x | (x << 8)) & 0x00FF00FFu;
@@ -252,7 +255,9 @@ inline Floats sqrt_lanes(Floats v) {
 
 inline uint32_t reach_steps(const TileGaussian& t, int64_t x0, int64_t y0) {
   const float q = t.a * t.c - t.b * t.b;
-  const bool spans = q > 0.0f && t.a > 0.0f;  // else (a degenerate conic) every row of the box is walked whole
+  // a conic too ill-conditioned for float32 to place its rows' spans (q is a difference of near-equal products:
+  // needles hundreds of pixels long), or a degenerate one: every row of the box is walked whole
+  const bool spans = q > kWellConditioned * (t.a * t.c) && t.a > 0.0f;
   const float inv_a = 1.0f / t.a, slope = t.b * inv_a, cx = t.mx - static_cast<float>(x0),
               cy = t.my - static_cast<float>(y0), ey2 = t.ey * t.ey;
   const float first_row = static_cast<float>(t.ya - y0), end_row = static_cast<float>(t.yb - y0);
@@ -310,12 +315,12 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
                    const float* __restrict dL_tile, float* __restrict grads, int64_t stride,
                    Floats* __restrict feature_lanes, float* __restrict f_active) {
   const int64_t A = static_cast<int64_t>(active.size());
-  TileEntry next = max_last > 0 ? tile_entry(in, in.ids[start + max_last - 1], r) : TileEntry{};
+  TileEntry upcoming = max_last > 0 ? tile_entry(in, in.ids[start + max_last - 1], r) : TileEntry{};
   for (int e = start + max_last - 1; e >= start; --e) {  // back to front
     const int g = in.ids[e];
     if (e - kPrefetchAhead >= start) prefetch_record(in, in.ids[e - kPrefetchAhead]);
-    const TileEntry now = next;
-    if (e > start) next = tile_entry(in, in.ids[e - 1], r);
+    const TileEntry now = upcoming;
+    if (e > start) upcoming = tile_entry(in, in.ids[e - 1], r);
     const TileGaussian& tg = now.g;
     const int index = e - start;
     float* gg = grads + static_cast<int64_t>(g) * stride;
@@ -407,11 +412,11 @@ std::vector<torch::Tensor> composite_forward(torch::Tensor means2d, torch::Tenso
       std::fill(acc, acc + C * kTilePixels, 0.0f);
       int remaining = static_cast<int>((r.x1 - r.x0) * (r.y1 - r.y0));
       const int start = in.offsets[k], stop = in.offsets[k + 1];
-      TileEntry next = start < stop ? tile_entry(in, in.ids[start], r) : TileEntry{};
+      TileEntry upcoming = start < stop ? tile_entry(in, in.ids[start], r) : TileEntry{};
       for (int e = start; e < stop && remaining > 0; ++e) {
         if (e + kPrefetchAhead < stop) prefetch_record(in, in.ids[e + kPrefetchAhead]);
-        const TileEntry now = next;
-        if (e + 1 < stop) next = tile_entry(in, in.ids[e + 1], r);
+        const TileEntry now = upcoming;
+        if (e + 1 < stop) upcoming = tile_entry(in, in.ids[e + 1], r);
         const TileGaussian& tg = now.g;
         const int entry = e - start + 1;
         for (uint32_t steps = now.steps; steps != 0; steps &= steps - 1) {
