@@ -34,9 +34,12 @@
 #include <cstring>
 #include <vector>
 
+#include "raster_rules.h"
+
 namespace {
 
-constexpr float kAlphaMin = 1.0f / 255.0f;
+using glimpse_raster::kAlphaMin;
+
 constexpr float kAlphaMax = 0.999f;
 constexpr float kTransmittanceMin = 1e-4f;
 constexpr int kTile = 16;  // pixels per tile side (glimpse/render/rasterize.py TILE_SIZE)

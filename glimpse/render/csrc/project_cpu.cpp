@@ -8,12 +8,15 @@
 #include <cmath>
 #include <vector>
 
+#include "raster_rules.h"
+
 namespace {
+
+using glimpse_raster::kAlphaMin;
 
 constexpr float kLowPass = 0.3f;
 constexpr float kDetFloor = 1e-12f;
 constexpr float kFovMargin = 0.3f;
-constexpr float kAlphaMin = 1.0f / 255.0f;  // projection.py ALPHA_MIN
 constexpr float kRadiusSigmas = 3.0f;       // projection.py RADIUS_SIGMAS
 constexpr float kExtentSafety = 1e-3f;      // projection.py EXTENT_SAFETY
 constexpr int64_t kGrain = 2048;
