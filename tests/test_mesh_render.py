@@ -78,3 +78,16 @@ def test_textures_are_sampled_with_opengl_uv_origin():
     # y down in the image: the top rows see world y < 0, i.e. the quad's corners with uv v = 0 (red)
     assert view.rgb[5, 20, 0] > 0.5 and view.rgb[5, 20, 2] < 0.1
     assert view.rgb[25, 20, 2] > 0.5 and view.rgb[25, 20, 0] < 0.1
+
+
+def test_empty_sub_samples_take_the_background_colour():
+    R, t = pose(0.0, [0.0, 0.0, 0.0])
+    far = quad([0.0, 0.0, 4.0], 0.5, colour=(1.0, 0.0, 0.0))
+    background = (0.2, 0.4, 0.6)
+    view = render_meshes([far], K, R, t, W, H, supersample=4, background=background)
+    np.testing.assert_allclose(view.rgb[0, 0], background, atol=1e-6)  # no surface at all
+    lit = AMBIENT + DIFFUSE
+    np.testing.assert_allclose(view.rgb[14, 17], [lit, 0.0, 0.0], atol=1 / 255)  # wholly covered
+    # pixel 15's sub-samples: two of four columns covered (as in the test above), so half the background
+    half = (np.array([lit, 0.0, 0.0]) + np.array(background)) / 2
+    np.testing.assert_allclose(view.rgb[14, 15], half, atol=2 / 255)
