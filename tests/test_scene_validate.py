@@ -18,6 +18,7 @@ from glimpse.io.images import (
     frame_name,
     parse_frame_name,
     probe_image,
+    read_image_header,
     read_mask,
     read_rgb,
     write_png,
@@ -572,6 +573,19 @@ def test_load_valid_scene(scene: Path) -> None:
     assert kp3.layout == "openpose25" and kp3.joints.shape == (3, 25, 4)
 
 
+def test_a_checked_scene_reads_the_same_without_decoding_its_images(scene: Path) -> None:
+    """What a pipeline stage loads (``checked``: headers only) equals what a full validation loads; a mask
+    with a stray value is caught by the validation, which the stage's run has done before it."""
+    assert repr(load_scene(scene, checked=True)) == repr(load_scene(scene))  # numpy arrays inside: by repr
+    first_mask = sorted((scene / "humans" / "p0" / "masks").iterdir())[0]
+    grey = np.array(Image.open(first_mask))
+    grey[0, 0] = 7
+    Image.fromarray(grey).save(first_mask)
+    with pytest.raises(SceneError, match="only the values 0 and 255"):
+        load_scene(scene)
+    assert load_scene(scene, checked=True).frame_ids == [0, 1, 2]
+
+
 def test_static_scene_without_optional_parts(scene: Path) -> None:
     remove("cameras.json", "eval", "humans")(scene)
     yaml_set(camera_motion="static")(scene)
@@ -623,9 +637,14 @@ def test_image_helpers(tmp_path: Path) -> None:
     assert (info.format, info.mode, info.width, info.height, info.bit_depth) == ("PNG", "L", 16, 12, 8)
     cv2.imwrite(str(tmp_path / "deep.png"), np.zeros((4, 5, 3), np.uint16))
     assert probe_image(tmp_path / "deep.png").bit_depth == 16
+    Image.fromarray(rgb(16, 12)).save(tmp_path / "photo.jpg", quality=90)
+    for name in ("mask.png", "deep.png", "rgba.png", "photo.jpg"):  # the header alone says the same
+        assert read_image_header(tmp_path / name) == probe_image(tmp_path / name)
     (tmp_path / "bad.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
     with pytest.raises(ImageReadError):
         read_rgb(tmp_path / "bad.png")
+    with pytest.raises(ImageReadError):
+        read_image_header(tmp_path / "bad.png")
     with pytest.raises(ValueError):
         write_png(tmp_path / "f.png", np.zeros((4, 4), np.float32))
 

@@ -16,7 +16,12 @@ from glimpse.batch.config import BatchConfig
 from glimpse.batch.executors import run_local, run_ray, run_slurm
 from glimpse.batch.jobs import SceneJob, SceneResult, run_dir_of
 from glimpse.batch.summary import write_summary
-from glimpse.config import apply_override, command_params, config_from_mapping
+from glimpse.config import (
+    apply_override,
+    command_params,
+    config_from_mapping,
+    safe_load_yaml,
+)
 from glimpse.errors import EXIT_STAGE_FAILED, GlimpseError
 
 BATCH_PREFIX = "batch."
@@ -29,7 +34,7 @@ def batch_settings(params: str, slurm_profile: Path | None) -> tuple[BatchConfig
     stage_params = shlex.join(t for t in shlex.split(params or "") if not t.startswith(BATCH_PREFIX))
     if slurm_profile is not None:
         try:
-            profile = yaml.safe_load(Path(slurm_profile).read_text()) or {}
+            profile = safe_load_yaml(Path(slurm_profile).read_text()) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise GlimpseError(f"--slurm-profile {slurm_profile}: cannot read it as YAML ({exc})") from None
         if not isinstance(profile, dict):

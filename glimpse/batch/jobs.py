@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from glimpse.config import STAGE_NAMES
+from glimpse.config import STAGE_NAMES, safe_load_yaml
 from glimpse.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_USAGE
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
@@ -100,7 +100,7 @@ def run_dir_of(job: SceneJob) -> Path | None:
     if not scene_yaml.is_file():
         return None
     try:
-        return job.out / str(yaml.safe_load(scene_yaml.read_text())["name"])
+        return job.out / str(safe_load_yaml(scene_yaml.read_text())["name"])
     except (OSError, yaml.YAMLError, KeyError, TypeError):
         return None
 

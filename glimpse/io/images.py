@@ -29,6 +29,7 @@ __all__ = [
     "frame_name",
     "parse_frame_name",
     "probe_image",
+    "read_image_header",
     "read_mask",
     "read_rgb",
     "write_png",
@@ -110,6 +111,23 @@ def decode_image(path: str | Path) -> tuple[ImageInfo, Image.Image]:
         depth = _MODE_BITS.get(image.mode, 8)
     info = ImageInfo(image.format, image.mode, image.width, image.height, depth)
     return info, image
+
+
+def read_image_header(path: str | Path) -> ImageInfo:
+    """An image's format, mode, size and bit depth from its header alone, without decoding its pixels (for a
+    file already checked by ``decode_image``). Raises :class:`ImageReadError` when the header does not parse."""
+    try:
+        with open(path, "rb") as file:
+            depth = _png_bit_depth(file.read(26))
+            file.seek(0)
+            with Image.open(file) as image:
+                info = ImageInfo(image.format, image.mode, image.width, image.height,
+                                 _MODE_BITS.get(image.mode, 8) if depth is None else depth)
+    except OSError as err:
+        raise ImageReadError(f"cannot read the image's header ({err.strerror or err})") from err
+    except Exception as err:  # Pillow raises UnidentifiedImageError, SyntaxError, ValueError, ...
+        raise ImageReadError(f"cannot read the image's header ({err})") from err
+    return info
 
 
 def probe_image(path: str | Path) -> ImageInfo:

@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ContextManager
 
-import yaml
-
 from glimpse.body.config import BodyConfig, check_scene_body_model, person_model_files
 from glimpse.config import (
     Params,
@@ -28,6 +26,7 @@ from glimpse.config import (
     load_pipeline_yaml,
     parse_cli_params,
     resolve_params,
+    safe_load_yaml,
 )
 from glimpse.errors import ConfigError, GlimpseError, SceneError
 from glimpse.locks import exclusive_lock
@@ -181,7 +180,7 @@ def scene_input_hashes(scene_root: Path, spec: StageSpec, hashes: HashCache) -> 
         if not any(fnmatch.fnmatch(rel, pattern) for pattern in spec.scene_inputs):
             continue
         if rel == "scene.yaml":
-            content = yaml.safe_load((scene_root / rel).read_text()) or {}
+            content = safe_load_yaml((scene_root / rel).read_text()) or {}
             content.pop("overrides", None)
             result[rel] = hashlib.sha256(canonical_json(content).encode()).hexdigest()
         else:
@@ -216,7 +215,7 @@ def stage_params(params: Params, spec: StageSpec) -> dict[str, Any]:
 
 def scene_name(scene_root: Path) -> str:
     """The ``name`` from scene.yaml (the scene has been validated)."""
-    return str(yaml.safe_load((scene_root / "scene.yaml").read_text())["name"])
+    return str(safe_load_yaml((scene_root / "scene.yaml").read_text())["name"])
 
 
 def locate_run(scene_root: Path, out_root: Path, whole_pipeline: bool = False, cli_params: str = "") -> RunPaths:
@@ -256,7 +255,7 @@ def check_writable(out_root: Path) -> None:
 def resolve_scene_params(scene_root: Path, cli_params: str) -> Params:
     """Every parameter: pipeline.yaml < the scene's overrides < ``cli_params``; ConfigError when one is
     unknown or invalid, or when the scene's body model and ``body`` disagree."""
-    scene_yaml = yaml.safe_load((scene_root / "scene.yaml").read_text()) or {}
+    scene_yaml = safe_load_yaml((scene_root / "scene.yaml").read_text()) or {}
     params = resolve_params(load_pipeline_yaml(resolve_auto=False), scene_yaml.get("overrides") or {},
                             parse_cli_params(cli_params),
                             str(scene_root / "scene.yaml"))

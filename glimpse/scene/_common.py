@@ -12,7 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.errors import Violation
-from glimpse.io.images import ImageInfo, ImageReadError, decode_image, frame_name
+from glimpse.io.images import (
+    ImageInfo,
+    ImageReadError,
+    decode_image,
+    frame_name,
+    read_image_header,
+)
 
 #: ``<pid>`` and eval camera names: letters, digits, ``_`` or ``-``.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
@@ -33,6 +39,8 @@ class SceneFacts:
                  when it has none (or no cameras.json), None when it is unreadable.
     persons:     names of the well-formed person folders in humans/.
     person_3d_files: relative paths of the smpl.npz / keypoints3d.npz files found.
+    decode_images: decode every image and mask completely (a validation); False reads only their headers, for
+                 a scene that has passed validation already (ids, sizes and formats are still checked).
     """
 
     root: Path
@@ -46,6 +54,7 @@ class SceneFacts:
     has_poses: bool | None = False
     persons: set[str] = field(default_factory=set)
     person_3d_files: list[str] = field(default_factory=list)
+    decode_images: bool = True
 
     def add(self, file: str, rule: str, found: str) -> None:
         """Record one violation (``file`` relative to the scene root)."""
@@ -132,7 +141,8 @@ def _id_text(frame_id: int) -> str:
 
 
 def check_image(facts: SceneFacts, path: Path, what: str) -> ImageInfo | None:
-    """Decode an input image (frame, eval view, reference photo) completely.
+    """Decode an input image (frame, eval view, reference photo) completely (its header only when
+    ``facts.decode_images`` is False).
 
     Records a violation when it does not decode, is not PNG/JPEG, or is not
     8-bit grey/RGB(A).  Returns its info when it decodes (even when it breaks
@@ -140,7 +150,7 @@ def check_image(facts: SceneFacts, path: Path, what: str) -> ImageInfo | None:
     """
     rel = facts.rel(path)
     try:
-        info, _ = decode_image(path)
+        info = decode_image(path)[0] if facts.decode_images else read_image_header(path)
     except ImageReadError as err:
         facts.add(rel, f"{what} must be a PNG or JPEG image that decodes completely", str(err))
         return None
@@ -158,13 +168,14 @@ def _depth_text(info: ImageInfo) -> str:
 
 def check_mask(facts: SceneFacts, path: Path, size: tuple[int, int] | None, size_rule: str) -> None:
     """Check one mask PNG: decodes, single-channel 8-bit (mode L, or 1-bit),
-    values 0 and 255 only, and ``size`` = (width, height) when known.
+    values 0 and 255 only (not checked when ``facts.decode_images`` is False), and ``size`` = (width, height)
+    when known.
 
     size_rule: how the size rule reads, e.g. ``"a mask must have the frame size"``.
     """
     rel = facts.rel(path)
     try:
-        info, image = decode_image(path)
+        info, image = decode_image(path) if facts.decode_images else (read_image_header(path), None)
     except ImageReadError as err:
         facts.add(rel, "a mask must be a PNG image that decodes completely", str(err))
         return
@@ -174,7 +185,7 @@ def check_mask(facts: SceneFacts, path: Path, size: tuple[int, int] | None, size
     if not ((info.mode == "L" and info.bit_depth == 8) or info.mode == "1"):
         facts.add(rel, "a mask must be a single-channel 8-bit PNG (mode L, or 1-bit)", _depth_text(info))
         return
-    if info.mode == "L":
+    if info.mode == "L" and image is not None:
         counts = np.bincount(np.asarray(image, dtype=np.uint8).ravel(), minlength=256)
         counts[0] = counts[255] = 0
         bad = np.flatnonzero(counts)

@@ -22,14 +22,16 @@ from glimpse.scene.validate import inspect_scene
 __all__ = ["load_scene"]
 
 
-def load_scene(root: str | Path) -> Scene:
+def load_scene(root: str | Path, checked: bool = False) -> Scene:
     """Validate ``root`` and read it.
 
     Raises :class:`~glimpse.errors.SceneError` listing every violation when the
     folder breaks ``glimpse-scene/1``.  Paths in the result are absolute.
+    ``checked``: the caller has validated this folder as it is now (a pipeline stage: its run validates the
+    scene, cached by file, before the stage starts), so images are read by their headers, not decoded again.
     """
     root = Path(root).absolute()
-    facts = inspect_scene(root)
+    facts = inspect_scene(root, decode_images=not checked)
     if facts.violations:
         raise SceneError(str(root), facts.violations)
     assert facts.scene_yaml is not None and facts.frame_ids is not None and facts.frame_size is not None

@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import yaml
 
+from glimpse.config import safe_load_yaml
 from glimpse.errors import Violation
 from glimpse.io.images import FRAME_ID_MAX, ImageInfo, parse_frame_name
 from glimpse.scene._common import (
@@ -48,10 +49,11 @@ def validate_scene(root: str | Path) -> list[Violation]:
     return inspect_scene(root).violations
 
 
-def inspect_scene(root: str | Path) -> SceneFacts:
+def inspect_scene(root: str | Path, decode_images: bool = True) -> SceneFacts:
     """Validate a scene and return what was learnt on the way (frame ids, frame
-    size...) with the violations, so that the reader need not decode again."""
-    facts = SceneFacts(root=Path(root))
+    size...) with the violations, so that the reader need not decode again.
+    ``decode_images`` False reads images by their headers only (SceneFacts)."""
+    facts = SceneFacts(root=Path(root), decode_images=decode_images)
     if not facts.root.is_dir():
         facts.add(".", "the scene must be a folder", "a file" if facts.root.exists() else "no such folder")
         return facts
@@ -106,7 +108,7 @@ def _load_yaml(facts: SceneFacts, path: Path) -> object:
         facts.add("scene.yaml", "scene.yaml must be a YAML file", "a folder")
         return _FAILED
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return safe_load_yaml(path.read_text(encoding="utf-8"))
     except UnicodeDecodeError as err:
         facts.add("scene.yaml", "scene.yaml must be UTF-8 text", str(err))
     except yaml.YAMLError as err:

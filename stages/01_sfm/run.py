@@ -32,7 +32,7 @@ def run(ctx: StageContext) -> None:
     config = ctx.section(STAGE)
     compute = ctx.section("compute")
     apply_compute(compute)
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     with ctx.timed("stage"):
         outcome = estimate_cameras(scene, config, ctx.out / "frames", ctx.work / "colmap_work",
                                    resolved_threads(compute), compute.seed)

@@ -35,7 +35,7 @@ def run(ctx: StageContext) -> None:
     config = ctx.section(STAGE)
     body = ctx.section("body")
     apply_compute(ctx.section("compute"))
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     cameras_dir = ctx.upstream_dir("01_sfm")
     _, _, cameras = read_cameras_json(cameras_dir / "cameras.json")
     units = json.loads((cameras_dir / "report.json").read_text())["units"]

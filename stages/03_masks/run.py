@@ -32,7 +32,7 @@ def run(ctx: StageContext) -> None:
     config = ctx.section(STAGE)
     body = ctx.section("body")
     apply_compute(ctx.section("compute"))
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     sfm, fits = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")
     camera_motion = json.loads((sfm / "report.json").read_text())["camera_motion"]

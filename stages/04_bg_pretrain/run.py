@@ -37,7 +37,7 @@ def run(ctx: StageContext) -> None:
     render = ctx.section("render")
     compute = ctx.section("compute")
     apply_compute(compute)
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     width, height, cameras = read_cameras_json(sfm / "cameras.json")
     points = sfm / "points.ply"

@@ -44,7 +44,7 @@ def run(ctx: StageContext) -> None:
     apply_compute(compute)
     if plan.identity == "trained":  # before any work: missing weights or no CUDA stop the stage here
         check_sds_can_run(diffusion, device)
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     sfm, fits, masks = ctx.upstream_dir("01_sfm"), ctx.upstream_dir("02_smpl_fit"), ctx.upstream_dir("03_masks")
     _, _, cameras = read_cameras_json(sfm / "cameras.json")
     models = BodyModels.load(ctx.section("body"), dtype=torch.float64)

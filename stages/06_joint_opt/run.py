@@ -53,7 +53,7 @@ def run(ctx: StageContext) -> None:
     if prior_kind == "sds":  # before any work: missing weights or no CUDA stop the stage here
         check_sds_can_run(diffusion, device)
     apply_compute(compute)
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     dirs = {name: ctx.upstream_dir(name) for name in UPSTREAM}
     width, height, cameras = read_cameras_json(dirs["01_sfm"] / "cameras.json")
     splats, _ = read_gaussians_ply(dirs["04_bg_pretrain"] / "background.ply")

@@ -59,7 +59,7 @@ def run(ctx: StageContext) -> None:
     config, render, body, compute = (ctx.section(name) for name in (STAGE, "render", "body", "compute"))
     apply_compute(compute)
     device = resolve_device(compute)
-    scene = load_scene(ctx.scene_root)
+    scene = load_scene(ctx.scene_root, checked=True)
     sfm, masks, joint = (ctx.upstream_dir(name) for name in ("01_sfm", "03_masks", "06_joint_opt"))
     width, height, cameras = read_cameras_json(sfm / "cameras.json")
     sfm_report = json.loads((sfm / "report.json").read_text())
