@@ -554,7 +554,7 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
                       np.array([[0.0, 0.0, 3.0]]), 1.0, "free", np.zeros(1, bool))
     camera = Camera(torch.tensor([[40.0, 0, 23.5], [0, 40.0, 31.5], [0, 0, 1]]), torch.eye(3), torch.zeros(3), 48, 64)
     image = torch.as_tensor(np.random.default_rng(0).integers(0, 255, (64, 48, 3)), dtype=torch.uint8)
-    pixels = FrameCache(lambda _: (image, torch.ones(64, 48, dtype=torch.bool), None), capacity=1)
+    pixels = FrameCache(lambda _: (image, torch.ones(64, 48, dtype=torch.bool), None, {}), capacity=1)
     views = [JointView(0, camera, pixels.get)]
 
     pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3), 48, 64)

@@ -146,3 +146,27 @@ def test_masked_lpips_zeroes_both_images_outside_the_mask(lpips_modules) -> None
     changed = torch.where(mask.unsqueeze(-1), pred, noise)
     torch.testing.assert_close(lpips_loss(module, changed, target, mask), expected)
     assert lpips_loss(module, pred, target).shape == ()
+
+
+@needs_lpips
+@pytest.mark.parametrize("net", ["alex", "vgg"])
+def test_lpips_against_kept_target_features_is_the_same_loss_to_the_bit(lpips_modules, net: str) -> None:
+    """Stage 06 keeps each frame's target features: the loss and its gradient must not change."""
+    from glimpse.metrics.losses import lpips_loss_to_features
+
+    pred, target, mask = images(5, (1, 40, 56, 3))
+    pred, target, mask = pred[0], target[0], mask[0]
+    module = lpips_modules[net]
+    features = module.target_features(target * mask.unsqueeze(-1).float())
+    values, grads = [], []
+    for loss_of in (lambda x: lpips_loss(module, x, target, mask),
+                    lambda x: lpips_loss_to_features(module, x, features, mask)):
+        x = pred.clone().requires_grad_(True)
+        loss = loss_of(x)
+        loss.backward()
+        values.append(loss.detach())
+        grads.append(x.grad)
+    assert torch.equal(values[0], values[1]) and torch.equal(grads[0], grads[1])
+    assert all(not f.requires_grad for f in features)
+    with pytest.raises(ValueError, match="different sizes"):
+        lpips_loss_to_features(module, pred[:32], features)

@@ -81,14 +81,14 @@ def load_views(inputs: JointInputs, config: JointConfig, device: torch.device, f
     if not inputs.cameras:
         raise GlimpseError("06_joint_opt: no frame has a camera (stage 01's cameras.json is empty)")
 
-    def read(fid: int) -> tuple[torch.Tensor, torch.Tensor, Box | None]:
+    def read(fid: int) -> tuple[torch.Tensor, torch.Tensor, Box | None, dict]:
         name = frame_name(fid)
         union = read_mask(inputs.masks_dir / "union" / f"{name}.png")
         occluders = [read_mask(path) for pid in inputs.bodies
                      if (path := inputs.occluders_dir / pid / f"{name}.png").is_file()]
         keep = ~static_occlusion(union, occluders)
         box = people_box(union, config.loss.lpips_margin_px, config.loss.lpips_min_px)
-        return torch.as_tensor(read_rgb(files[fid]), device=device), torch.as_tensor(keep, device=device), box
+        return torch.as_tensor(read_rgb(files[fid]), device=device), torch.as_tensor(keep, device=device), box, {}
 
     cache = FrameCache(read, frames.frames)
     views = [JointView(fid, render_camera(inputs.cameras[fid], device), cache.get) for fid in sorted(inputs.cameras)]

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -36,7 +36,7 @@ from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_backg
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.config import JointConfig
-from glimpse.metrics.losses import dssim_loss_on, hard_surface_loss, lpips_loss, mse_loss
+from glimpse.metrics.losses import dssim_loss_on, hard_surface_loss, lpips_loss, lpips_loss_to_features, mse_loss
 from glimpse.metrics.lpips import LPIPS
 from glimpse.prior.base import UnseenPrior
 from glimpse.render import Camera, RenderOutput
@@ -47,17 +47,19 @@ PERSON_SEED_STRIDE = 101  # person k's densification at iteration i draws from s
 
 
 Box = tuple[int, int, int, int]
+LPIPS_TARGET = "lpips_target"  # JointView.derived's key of the LPIPS target features
 
 
 @dataclass
 class JointView:
     """One input frame: camera, and ``pixels(frame_id)`` -> its image [H, W, 3] uint8, the pixels the losses
-    use ``keep [H, W]`` bool and the LPIPS box ``(y0, y1, x0, x1)`` around its people (None: nobody visible);
-    ``pixels`` is the stage's FrameCache (read from disk when needed, a bounded number kept)."""
+    use ``keep [H, W]`` bool, the LPIPS box ``(y0, y1, x0, x1)`` around its people (None: nobody visible) and
+    a dict for what the trainer derives from them once (the LPIPS target's features); ``pixels`` is the stage's
+    FrameCache (read from disk when needed, a bounded number kept, the derived values with them)."""
 
     frame_id: int
     camera: Camera
-    pixels: Callable[[int], tuple[Tensor, Tensor, Box | None]]
+    pixels: Callable[[int], tuple[Tensor, Tensor, Box | None, dict[str, Any]]]
 
     @property
     def image(self) -> Tensor:
@@ -71,18 +73,34 @@ class JointView:
     def people_box(self) -> Box | None:
         return self.pixels(self.frame_id)[2]
 
+    @property
+    def derived(self) -> dict[str, Any]:
+        return self.pixels(self.frame_id)[3]
+
     def target(self) -> Tensor:
         return self.image.float() / 255.0
 
 
 def reconstruction_terms(config: JointConfig, lpips_module: LPIPS | None, rendered: Tensor, target: Tensor,
-                         keep: Tensor, box: Box | None) -> dict[str, Tensor]:
-    """Unweighted MSE, D-SSIM and (inside ``box``) LPIPS of ``rendered`` vs ``target`` [H, W, 3] over ``keep``."""
+                         keep: Tensor, box: Box | None, lpips_target: list[Tensor] | None = None
+                         ) -> dict[str, Tensor]:
+    """Unweighted MSE, D-SSIM and (inside ``box``) LPIPS of ``rendered`` vs ``target`` [H, W, 3] over ``keep``;
+    ``lpips_target``: :func:`lpips_target_features` of this target, when kept from an earlier iteration."""
     terms = {"mse": mse_loss(rendered, target, keep), "dssim": dssim_loss_on(rendered, target, keep)}
     if config.loss.lpips > 0 and lpips_module is not None and box is not None:
         y0, y1, x0, x1 = box
-        terms["lpips"] = lpips_loss(lpips_module, rendered[y0:y1, x0:x1], target[y0:y1, x0:x1], keep[y0:y1, x0:x1])
+        pred, inside = rendered[y0:y1, x0:x1], keep[y0:y1, x0:x1]
+        terms["lpips"] = (lpips_loss(lpips_module, pred, target[y0:y1, x0:x1], inside) if lpips_target is None
+                          else lpips_loss_to_features(lpips_module, pred, lpips_target, inside))
     return terms
+
+
+def lpips_target_features(lpips_module: LPIPS, target: Tensor, keep: Tensor, box: Box) -> list[Tensor]:
+    """The LPIPS features ``reconstruction_terms`` compares the render with: ``target [H, W, 3]`` inside ``box``,
+    black where ``keep`` is not set."""
+    y0, y1, x0, x1 = box
+    inside = keep[y0:y1, x0:x1].to(target.dtype).unsqueeze(-1)
+    return lpips_module.target_features(target[y0:y1, x0:x1] * inside)
 
 
 class JointTrainer(GaussianTrainer):
@@ -221,7 +239,8 @@ class JointTrainer(GaussianTrainer):
     def _loss(self, step: int, view: JointView, out: RenderOutput, present: list[int]) -> tuple[Tensor, dict]:
         """The total loss and its unweighted terms (the prior's come weighted) for one render."""
         weights = self.config.loss
-        terms = reconstruction_terms(self.config, self.lpips, out.rgb, view.target(), view.keep, view.people_box)
+        terms = reconstruction_terms(self.config, self.lpips, out.rgb, view.target(), view.keep, view.people_box,
+                                     self._lpips_target(view))
         total = sum(getattr(weights, name) * value for name, value in terms.items())
         if present and weights.hard_surface > 0:
             terms["hard_surface"] = sum(hard_surface_loss(out.group_alpha[1 + k], view.keep) for k in present)
@@ -230,6 +249,16 @@ class JointTrainer(GaussianTrainer):
         prior_terms = self.prior.losses(step, [self.people[k] for k in present])
         terms.update(prior_terms)
         return total + sum(prior_terms.values()), terms
+
+    def _lpips_target(self, view: JointView) -> list[Tensor] | None:
+        """The view's LPIPS target features, computed at the frame's first iteration and kept with its pixels
+        (half of the LPIPS forward pass; about 0.6 MB a frame for AlexNet at a 150x100 box)."""
+        if self.lpips is None or self.config.loss.lpips <= 0 or view.people_box is None:
+            return None
+        derived = view.derived
+        if LPIPS_TARGET not in derived:
+            derived[LPIPS_TARGET] = lpips_target_features(self.lpips, view.target(), view.keep, view.people_box)
+        return derived[LPIPS_TARGET]
 
     def _density_control(self, step: int, height: int) -> None:
         """Each person's densification and pruning, as the people's strategy schedules them; Gaussians that

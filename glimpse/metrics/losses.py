@@ -80,6 +80,17 @@ def lpips_loss(lpips_module: LPIPS, pred: Tensor, target: Tensor, mask: Tensor |
     return lpips_module(pred, target).mean()
 
 
+def lpips_loss_to_features(lpips_module: LPIPS, pred: Tensor, target_features: list[Tensor],
+                           mask: Tensor | None = None) -> Tensor:
+    """``lpips_loss`` of one ``pred [H, W, 3]`` against a target given by ``lpips_module.target_features`` of
+    the target, already multiplied by ``mask [H, W]`` when there is one (the same value, to the bit)."""
+    if mask is not None:
+        if mask.shape != pred.shape[:-1]:
+            raise ValueError(f"mask must be {tuple(pred.shape[:-1])}, found {tuple(mask.shape)}")
+        pred = pred * mask.to(device=pred.device, dtype=pred.dtype).unsqueeze(-1)
+    return lpips_module.distance_to_features(pred, target_features)
+
+
 def hard_surface(alpha: Tensor) -> Tensor:
     """Element-wise ``-log(exp(-a) + exp(a - 1)) + HARD_SURFACE_OFFSET``, 0 at a in {0, 1}.
 

@@ -196,6 +196,21 @@ class LPIPS(nn.Module):
         return distance[0] if unbatched else distance
 
     @torch.no_grad()
+    def target_features(self, target: Tensor) -> list[Tensor]:
+        """A fixed target's tapped unit features, ``target [H, W, 3]`` in [0, 1], for
+        :meth:`distance_to_features` (a loss against the same frame, again and again, computes them once)."""
+        return self._unit_features(target[None])
+
+    def distance_to_features(self, pred: Tensor, features: list[Tensor]) -> Tensor:
+        """0-d LPIPS distance of ``pred [H, W, 3]`` in [0, 1] to the target whose :meth:`target_features` these
+        are; differentiable in ``pred``, and ``forward(pred, target)`` to the bit."""
+        own = self._unit_features(pred[None])
+        if own[0].shape != features[0].shape:
+            raise ValueError(f"LPIPS: pred {tuple(pred.shape)} and the target's features come from images of "
+                             "different sizes")
+        return self._distance(list(zip(own, features, strict=True)))[0]
+
+    @torch.no_grad()
     def distances_to(self, preds: Sequence[Tensor], target: Tensor) -> list[Tensor]:
         """LPIPS of each of ``preds`` against one ``target``, all ``[H, W, 3]`` in [0, 1]: raw 0-d tensors, as
         ``forward`` gives one by one. The target and the preds go through the network in one batch (about 1.5x
