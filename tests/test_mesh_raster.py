@@ -2,12 +2,14 @@
 against the fixtures' OpenGL renderer (an independent implementation)."""
 
 import numpy as np
+import pytest
 import torch
 
 from glimpse.body.model import BodyModel
 from glimpse.fixtures.mesh_render import Mesh, render_meshes
 from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
-from glimpse.render.mesh_raster import rasterize_triangles
+from glimpse.render.composite_cpu import available
+from glimpse.render.mesh_raster import rasterize_meshes, rasterize_triangles
 
 K_SMALL = np.array([[10.0, 0.0, 4.0], [0.0, 10.0, 4.0], [0.0, 0.0, 1.0]])
 
@@ -55,3 +57,41 @@ def test_nearest_body_and_depth_agree_with_the_opengl_renderer():
     same = (owner == gl.owner) & (owner >= 0)
     close = np.isclose(raster.depth[same], gl.depth[same], rtol=1e-3)
     assert close.mean() > 0.995  # (a few silhouette pixels of one body can show different layers of it)
+
+
+@pytest.mark.skipif(not available(), reason="the C++ kernel does not build here")
+def test_the_cpp_z_buffer_equals_the_numpy_reference_to_the_bit():
+    """Random triangle soups (overlapping, both windings, slivers, edges through pixel centres, some off the
+    image or behind the camera), and two posed bodies, one in front of the other: the same faces and depths."""
+    rng = np.random.default_rng(7)
+    K = np.array([[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]])
+    for trial in range(6):
+        count = 400
+        centres = np.concatenate([rng.uniform(-1.2, 1.2, (count, 2)), rng.uniform(-0.5, 4.0, (count, 1))], 1)
+        points = (centres[:, None, :] + rng.normal(0.0, 0.15 * (trial + 1), (count, 3, 3))).reshape(-1, 3)
+        if trial % 2:  # corners on pixel centres and on a shared depth: edges through centres, exact depth ties
+            pixels = np.round(points[:, :2] / points[:, 2:] * 60.0 + [31.5, 23.5]) - [31.5, 23.5]
+            points[:, 2] = np.round(points[:, 2])
+            points[:, :2] = pixels / 60.0 * points[:, 2:]
+        faces = np.arange(len(points)).reshape(-1, 3)
+        faces[::5] = faces[::5, ::-1]
+        kernel = rasterize_triangles(points, faces, K, 64, 48, use_kernel=True)
+        reference = rasterize_triangles(points, faces, K, 64, 48, use_kernel=False)
+        assert (reference.face >= 0).sum() > 500
+        assert np.array_equal(kernel.face, reference.face) and np.array_equal(kernel.depth, reference.depth)
+    model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
+    pose = 0.2 * torch.randn(1, 69, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    body = model(torch.zeros(1, 10, dtype=torch.float64), torch.zeros(1, 3, dtype=torch.float64), pose,
+                 torch.tensor([[0.0, -0.3, 3.0]], dtype=torch.float64)).vertices[0].numpy()
+    K = intrinsics(320, 240, 60.0)
+    meshes = [body, body + [0.2, 0.0, 0.8]]
+    faces = model.faces.numpy()
+    assert all(np.array_equal(a, b) for a, b in zip(
+        vars(rasterize_meshes(meshes, faces, K, 320, 240)).values(),
+        vars(_numpy_meshes(meshes, faces, K, 320, 240)).values()))
+
+
+def _numpy_meshes(meshes, faces, K, width, height):
+    return rasterize_triangles(np.concatenate(meshes), np.concatenate([faces + k * len(meshes[0])
+                                                                       for k in range(len(meshes))]),
+                               K, width, height, use_kernel=False)

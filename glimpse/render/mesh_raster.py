@@ -7,9 +7,10 @@ convention, lies inside the projected triangle or on its edge. Depth is the came
 surface at the pixel centre (perspective-correct: 1/z interpolated linearly on the image).
 Triangles with a corner nearer than ``near`` are dropped (no clipping).
 
-Every triangle is tested against the pixels of its bounding box at once; triangles are grouped
-by bounding-box size (powers of two) so that small ones, almost all of a body mesh, cost a few
-candidate pixels each.
+The z-buffer runs in the C++ kernel (csrc/mesh_raster_cpu.cpp) where it builds, else in numpy, which
+is the reference: both give the same arrays to the bit. In numpy every triangle is tested against the
+pixels of its bounding box at once; triangles are grouped by bounding-box size (powers of two) so that
+small ones, almost all of a body mesh, cost a few candidate pixels each.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 NEAR = 1e-3  # camera z below which a triangle is dropped
 MAX_CANDIDATES = 4_000_000  # candidate (triangle, pixel) pairs evaluated per chunk
+MIN_AREA = 1e-12  # twice the projected area (pixels^2) below which a triangle covers nothing (csrc: kMinArea)
 
 
 @dataclass(frozen=True)
@@ -32,9 +34,33 @@ class MeshRaster:
 
 
 def rasterize_triangles(points: np.ndarray, faces: np.ndarray, K: np.ndarray, width: int, height: int,
-                        near: float = NEAR) -> MeshRaster:
-    """points [V, 3] camera coordinates; faces [F, 3] vertex indices; K [3, 3] -> MeshRaster."""
+                        near: float = NEAR, use_kernel: bool | None = None) -> MeshRaster:
+    """points [V, 3] camera coordinates; faces [F, 3] vertex indices; K [3, 3] -> MeshRaster. ``use_kernel``:
+    the C++ z-buffer (None: where it builds) or numpy (False); the same result either way."""
     points, faces = np.asarray(points, np.float64), np.asarray(faces, np.int64)
+    if use_kernel is None:
+        use_kernel = _kernel_available()
+    if use_kernel:
+        import torch
+
+        from glimpse.render.composite_cpu import extension
+
+        depth, face = extension().mesh_raster(torch.from_numpy(np.ascontiguousarray(points)),
+                                              torch.from_numpy(np.ascontiguousarray(faces)), float(K[0, 0]),
+                                              float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), near, width, height)
+        return MeshRaster(depth.numpy(), face.numpy())
+    return _rasterize_numpy(points, faces, K, width, height, near)
+
+
+def _kernel_available() -> bool:
+    from glimpse.render.composite_cpu import available
+
+    return available()
+
+
+def _rasterize_numpy(points: np.ndarray, faces: np.ndarray, K: np.ndarray, width: int, height: int, near: float
+                     ) -> MeshRaster:
+    """The reference z-buffer (``rasterize_triangles``'s arguments)."""
     corners = points[faces]  # [F, 3, 3]
     ids = np.nonzero((corners[:, :, 2] > near).all(1))[0]
     corners = corners[ids]
@@ -86,7 +112,7 @@ def _cover(uv: np.ndarray, inv_z: np.ndarray, low: np.ndarray, high: np.ndarray,
     in_box = (u <= high[:, 0, None, None]) & (v <= high[:, 1, None, None])  # [N, S, S]
     a, b, c = uv[:, 0], uv[:, 1], uv[:, 2]  # [N, 2]
     area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])  # [N]
-    usable = np.abs(area) > 1e-12
+    usable = np.abs(area) > MIN_AREA
     sign = np.where(area < 0, -1.0, 1.0)[:, None, None]
 
     def edge(p: np.ndarray, q: np.ndarray) -> np.ndarray:  # twice the signed area of (p, q, pixel)

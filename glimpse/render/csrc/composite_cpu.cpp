@@ -709,6 +709,10 @@ std::vector<torch::Tensor> skin_backward(torch::Tensor means, torch::Tensor cova
                                          torch::Tensor centre, torch::Tensor v_means, torch::Tensor v_cov,
                                          torch::Tensor v_dirs);
 
+// mesh_raster_cpu.cpp
+std::vector<torch::Tensor> mesh_raster_forward(torch::Tensor points, torch::Tensor faces, double fx, double fy,
+                                               double cx, double cy, double near, int64_t width, int64_t height);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "EWA projection, forward (CPU)");
   m.def("project_backward", &project_backward, "EWA projection, backward (CPU)");
@@ -725,4 +729,5 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("skin_forward", &skin_forward, "Posing canonical Gaussians for training, forward (CPU)");
   m.def("skin_backward", &skin_backward, "Posing canonical Gaussians for training, backward (CPU)");
   m.def("polar_rotations", &polar_rotations, "Closest rotations of 3x3 matrices, Newton's polar iteration (CPU)");
+  m.def("mesh_raster", &mesh_raster_forward, "Nearest triangle and depth at each pixel centre, a z-buffer (CPU)");
 }
