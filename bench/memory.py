@@ -93,7 +93,7 @@ def child(stage: str, run_dir: Path, cache: int, out: Path) -> None:
                ("04_bg_pretrain", "06_joint_opt", "render", "body", "compute")}
     compute: ComputeConfig = section["compute"]
     apply_compute(compute)
-    frames = FrameCacheSize(cache, min(compute.frame_read_ahead, cache - 1))
+    frames = FrameCacheSize(cache, min(compute.frame_read_ahead, cache - 1), compute.lpips_target_cache_mb)
     width, height, cameras = read_cameras_json(run_dir / "01_sfm" / "cameras.json")
     bodies = {p.parent.name: read_body_params(p) for p in sorted((run_dir / "02_smpl_fit" / "humans").glob("*/body.npz"))}
     import torch

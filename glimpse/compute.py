@@ -25,6 +25,7 @@ class ComputeConfig:
     seed: int
     frame_cache: int  # input frames (image and masks) stages 04 and 06 keep decoded, on the compute device
     frame_read_ahead: int  # frames read ahead of the training loop on a background thread (< frame_cache)
+    lpips_target_cache_mb: float  # stage 06's LPIPS target features kept with the cached frames, MB in all
     auto_schedule_scale: AutoScheduleScale
 
 

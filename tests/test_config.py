@@ -129,12 +129,12 @@ def test_compute_device_resolves_to_cpu_here_and_refuses_a_missing_cuda():
     from glimpse.compute import AutoScheduleScale, ComputeConfig, resolve_device
 
     schedules = AutoScheduleScale(0.1, 1.0)
-    assert resolve_device(ComputeConfig("cpu", 1, 0, 32, 4, schedules)) == torch.device("cpu")
+    assert resolve_device(ComputeConfig("cpu", 1, 0, 32, 4, 0.0, schedules)) == torch.device("cpu")
     expected = "cuda" if torch.cuda.is_available() else "cpu"
-    assert resolve_device(ComputeConfig("auto", 1, 0, 32, 4, schedules)).type == expected
+    assert resolve_device(ComputeConfig("auto", 1, 0, 32, 4, 0.0, schedules)).type == expected
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="compute.device is cuda"):
-            resolve_device(ComputeConfig("cuda", 1, 0, 32, 4, schedules))
+            resolve_device(ComputeConfig("cuda", 1, 0, 32, 4, 0.0, schedules))
 
 
 def test_the_stage_names_the_report_and_the_batch_read_are_the_pipelines_stages_in_order():

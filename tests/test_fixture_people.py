@@ -87,7 +87,8 @@ def rest_ear_height(model, person) -> float:
 
 
 def test_clothes_stand_off_the_body(model, striped):
-    from glimpse.fixtures.people import _rest_body, look_betas, vertex_normals
+    from glimpse.body.normals import vertex_normals
+    from glimpse.fixtures.people import _rest_body, look_betas
     bare = _rest_body(model, look_betas(model, striped.look))[0]
     normals = vertex_normals(bare, np.asarray(model.data.faces))
     moved = striped.rest_vertices - bare[striped.body_index]

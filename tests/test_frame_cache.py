@@ -42,10 +42,10 @@ def test_read_ahead_happens_on_another_thread_and_gives_the_same_items():
 
 
 def test_sizes_are_checked():
-    FrameCacheSize(1, 0)
+    FrameCacheSize(1, 0, 0.0)
     for frames, ahead in ((0, 0), (4, 4), (4, -1)):
         with pytest.raises(ConfigError, match="compute.frame_cache"):
-            FrameCacheSize(frames, ahead)
+            FrameCacheSize(frames, ahead, 0.0)
 
 
 class _CountingTrainer(GaussianTrainer):

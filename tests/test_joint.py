@@ -542,19 +542,17 @@ def test_render_passes_are_exr_beside_the_pngs_with_linear_colour_alpha_depth_an
     assert cli(["render", str(run_dir), "--passes", "rgb,normals"]) == EXIT_BAD_INPUT
 
 
-def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
-    """Train 24 iterations (densification and pruning included) with checkpoints every 10; a second trainer
-    started from the same initial state resumes from the iteration-20 checkpoint and ends identical."""
+def _one_view_trainer(body_model, tmp_path, config, lpips_module=None, box=None, lpips_target_cache_mb=0.0):
+    """A factory of JointTrainers of one person seen in one random 48x64 frame (each call starts afresh)."""
     from glimpse.io.frame_cache import FrameCache
     from glimpse.joint.train import JointTrainer, JointView
     from glimpse.render import Camera
 
-    config = replace(JOINT, schedule_scale=0.002, checkpoint_every=10, loss=replace(JOINT.loss, lpips=0.0))
     body = BodyParams(np.array([0]), np.zeros(10), np.array([[math.pi, 0.0, 0.0]]), np.zeros((1, 69)),
                       np.array([[0.0, 0.0, 3.0]]), 1.0, "free", np.zeros(1, bool))
     camera = Camera(torch.tensor([[40.0, 0, 23.5], [0, 40.0, 31.5], [0, 0, 1]]), torch.eye(3), torch.zeros(3), 48, 64)
     image = torch.as_tensor(np.random.default_rng(0).integers(0, 255, (64, 48, 3)), dtype=torch.uint8)
-    pixels = FrameCache(lambda _: (image, torch.ones(64, 48, dtype=torch.bool), None, {}), capacity=1)
+    pixels = FrameCache(lambda _: (image, torch.ones(64, 48, dtype=torch.bool), box, {}), capacity=1)
     views = [JointView(0, camera, pixels.get)]
 
     pinhole = PinholeCamera(camera.K.double().numpy(), np.eye(3), np.zeros(3), 48, 64)
@@ -568,8 +566,17 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
         prior = make_prior("surface", PriorContext([person], visibility, BodyModels(body_model), RENDER, 0,
                                                    config.scaled),
                            surface)
-        return JointTrainer(background, [person], views, config, RENDER, prior, None, 0,
-                            tmp_path / "checkpoint.pt", "key")
+        return JointTrainer(background, [person], views, config, RENDER, prior, lpips_module, 0,
+                            tmp_path / "checkpoint.pt", "key", lpips_target_cache_mb)
+
+    return trainer
+
+
+def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
+    """Train 24 iterations (densification and pruning included) with checkpoints every 10; a second trainer
+    started from the same initial state resumes from the iteration-20 checkpoint and ends identical."""
+    config = replace(JOINT, schedule_scale=0.002, checkpoint_every=10, loss=replace(JOINT.loss, lpips=0.0))
+    trainer = _one_view_trainer(body_model, tmp_path, config)
 
     first = trainer()
     first.run()
@@ -581,6 +588,21 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(body_model, tmp_path):
         assert torch.equal(a, b)
     assert torch.equal(first.people[0].pose_offsets, second.people[0].pose_offsets)
     assert torch.equal(first.background.sh_dc, second.background.sh_dc)
+
+
+def test_the_lpips_target_is_kept_with_the_frame_while_its_budget_lasts(body_model, tmp_path):
+    """The frame's LPIPS target features are computed once and kept when they fit compute.lpips_target_cache_mb,
+    recomputed (the same values) when they do not."""
+    from glimpse.metrics.lpips import LPIPS
+
+    lpips_module = LPIPS("alex")
+    box = (8, 56, 4, 44)
+    for budget_mb, kept in ((1.0, True), (0.01, False)):
+        trainer = _one_view_trainer(body_model, tmp_path, JOINT, lpips_module, box, budget_mb)()
+        view = trainer.views[0]
+        first, again = trainer._lpips_target(view), trainer._lpips_target(view)
+        assert (first is again) == kept and all(torch.equal(a, b) for a, b in zip(first, again, strict=True))
+        assert sum(f.numel() * 4 for f in first) > 0.01 * 2**20
 
 
 def test_a_held_out_frame_of_the_input_video_is_scored_with_people_posed_between_its_neighbours(tiny, tmp_path):

@@ -25,7 +25,8 @@ from glimpse.eval.coverage import CoverageConfig, canonical_hole_share
 from glimpse.eval.never_seen import PosedBodies, flat_bodies
 from glimpse.eval.views import ScoredView
 from glimpse.humans.person import initial_person
-from glimpse.humans.visibility import BodyVisibility, VisibilityConfig, body_visibility, vertex_normals
+from glimpse.body.normals import vertex_normals
+from glimpse.humans.visibility import BodyVisibility, VisibilityConfig, body_visibility
 from glimpse.prior import PriorContext, make_prior
 from glimpse.prior.complete import body_graph, part_groups, part_means, part_parents, screened_fill
 from glimpse.prior.config import SurfacePriorConfig
@@ -162,6 +163,16 @@ def test_vertex_normals_point_out_of_the_body(body_model):
     normals = vertex_normals(template, body_model.faces.numpy())
     chest = np.argmax(template[:, 2])  # the most forward vertex
     assert normals[chest, 2] > 0.8
+    # the same sums, in the same order, as adding the faces' normals corner by corner; an unused vertex gets zero
+    points = np.concatenate([template, [[9.0, 9.0, 9.0]]])
+    faces = body_model.faces.numpy()
+    corners = points[faces]
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    summed = np.zeros_like(points)
+    for k in range(3):
+        np.add.at(summed, faces[:, k], face_normals)
+    expected = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), 1e-300)
+    assert np.array_equal(vertex_normals(points, faces), expected) and not vertex_normals(points, faces)[-1].any()
 
 
 def test_a_camera_sees_the_front_not_the_back_and_people_and_occluders_hide(body_model):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from glimpse.body.normals import vertex_normals
 from glimpse.cameras.model import PinholeCamera
 
 PERSON_COLOURS = ((230, 80, 60), (60, 140, 230), (90, 200, 90), (230, 190, 50), (190, 90, 210), (60, 200, 200))
@@ -30,16 +31,6 @@ class OverlayBody:
     keypoints: np.ndarray | None
     confidence: np.ndarray | None
     colour: tuple[int, int, int]
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """[V, 3] unit area-weighted normals of a triangle mesh."""
-    corners = vertices[faces]  # [F, 3, 3]
-    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], face_normals)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
 
 
 def overlay_frame(image: np.ndarray, camera: PinholeCamera, faces: np.ndarray, bodies: list[OverlayBody]) -> np.ndarray:

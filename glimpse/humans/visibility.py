@@ -27,6 +27,7 @@ import torch
 
 from glimpse.body.model import BodyModel
 from glimpse.body.models import BodyModels
+from glimpse.body.normals import vertex_normals
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
@@ -75,18 +76,6 @@ class BodyVisibility:
             if "format" not in data or str(data["format"]) != VISIBILITY_FORMAT:
                 raise GlimpseError(f"{path}: not a {VISIBILITY_FORMAT} file; rerun stage 06")
             return cls(data["seen_frames"], data["best_cosine"], data["best_px_per_m"])
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """[V, 3] unit area-weighted vertex normals of a mesh (vertices [V, 3], faces [F, 3], counter-clockwise
-    seen from outside); zero for a vertex no face touches."""
-    corners = vertices[faces]
-    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # length = 2 x area
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], face_normals)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
 def frame_visibility(bodies: list[np.ndarray], scales: list[float], faces: np.ndarray, camera: PinholeCamera,

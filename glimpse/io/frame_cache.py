@@ -24,15 +24,19 @@ Item = TypeVar("Item")
 @dataclass(frozen=True)
 class FrameCacheSize:
     """How many frames a stage keeps decoded (``compute.frame_cache``) and reads ahead
-    (``compute.frame_read_ahead``)."""
+    (``compute.frame_read_ahead``), and how many MB of values derived from them it may keep with them
+    (``compute.lpips_target_cache_mb``: stage 06's LPIPS target features)."""
 
     frames: int
     read_ahead: int
+    derived_mb: float
 
     def __post_init__(self) -> None:
         if self.frames < 1 or not 0 <= self.read_ahead < self.frames:
             raise ConfigError(f"compute.frame_cache must be >= 1 and compute.frame_read_ahead in [0, frame_cache), "
                               f"found {self.frames} and {self.read_ahead}")
+        if not self.derived_mb >= 0:
+            raise ConfigError(f"compute.lpips_target_cache_mb must be >= 0, found {self.derived_mb}")
 
 
 class FrameCache(Generic[Item]):

@@ -147,7 +147,7 @@ def train_joint(inputs: JointInputs, config: JointConfig, render: RenderConfig, 
     background = inputs.background.to(device)
     lpips_module = LPIPS(config.loss.lpips_net).to(device) if config.loss.lpips > 0 else None
     trainer = JointTrainer(background, people, views, config, render, prior, lpips_module, seed,
-                           work / "checkpoint.pt", key)
+                           work / "checkpoint.pt", key, frames.derived_mb)
     trainer.read_ahead(cache.prefetch, frames.read_ahead)
     training = trainer.run()
     frames_doc = _write_views(trainer, views, config, inputs, out)

@@ -110,10 +110,11 @@ class JointTrainer(GaussianTrainer):
 
     def __init__(self, background: GaussianModel, people: list[PersonGaussians], views: list[JointView],
                  config: JointConfig, render: RenderConfig, prior: UnseenPrior, lpips_module: LPIPS | None,
-                 seed: int, checkpoint: Path, key: str):
+                 seed: int, checkpoint: Path, key: str, lpips_target_cache_mb: float = 0.0):
         super().__init__(config.total_iterations, config.checkpoint_every, checkpoint, key, background.means.device)
         self.background, self.people, self.views, self.config, self.render = background, people, views, config, render
         self.prior, self.lpips, self.seed = prior, lpips_module, seed
+        self.lpips_target_bytes_left = int(lpips_target_cache_mb * 2**20)  # what may still be kept (never returned)
         self.background_degree = min(background.sh_degree, render.sh_degree)
         self.extent = scene_extent([v.camera for v in views], background.means.detach())
         self.background_rates = config.scaled_rates(config.background_lr)
@@ -251,14 +252,20 @@ class JointTrainer(GaussianTrainer):
         return total + sum(prior_terms.values()), terms
 
     def _lpips_target(self, view: JointView) -> list[Tensor] | None:
-        """The view's LPIPS target features, computed at the frame's first iteration and kept with its pixels
-        (half of the LPIPS forward pass; about 0.6 MB a frame for AlexNet at a 150x100 box)."""
+        """The view's LPIPS target features, kept with its pixels while ``lpips_target_cache_mb`` lasts (half of the
+        LPIPS forward pass; about 0.6 MB a frame for AlexNet at a 150x100 box). The budget counts every set kept,
+        also those the frame cache has since dropped, so the features never hold more than it. None: no LPIPS."""
         if self.lpips is None or self.config.loss.lpips <= 0 or view.people_box is None:
             return None
         derived = view.derived
-        if LPIPS_TARGET not in derived:
-            derived[LPIPS_TARGET] = lpips_target_features(self.lpips, view.target(), view.keep, view.people_box)
-        return derived[LPIPS_TARGET]
+        if LPIPS_TARGET in derived:
+            return derived[LPIPS_TARGET]
+        features = lpips_target_features(self.lpips, view.target(), view.keep, view.people_box)
+        size = sum(f.numel() * f.element_size() for f in features)
+        if size <= self.lpips_target_bytes_left:
+            self.lpips_target_bytes_left -= size
+            derived[LPIPS_TARGET] = features
+        return features
 
     def _density_control(self, step: int, height: int) -> None:
         """Each person's densification and pruning, as the people's strategy schedules them; Gaussians that

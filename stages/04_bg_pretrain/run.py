@@ -47,7 +47,7 @@ def run(ctx: StageContext) -> None:
                               scene.fps)
     key = fingerprint(ctx.params, [(d / "manifest.json").read_text() for d in (sfm, fits, masks)])
     with ctx.timed("train"):
-        frames = FrameCacheSize(compute.frame_cache, compute.frame_read_ahead)
+        frames = FrameCacheSize(compute.frame_cache, compute.frame_read_ahead, compute.lpips_target_cache_mb)
         result = train_background(inputs, config, render, compute.seed, resolve_device(compute), frames, ctx.work, key,
                                   ctx.out)
     write_gaussians_ply(ctx.out / "background.ply", result.model.to_splats(),

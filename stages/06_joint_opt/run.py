@@ -66,7 +66,8 @@ def run(ctx: StageContext) -> None:
     with ctx.timed("train"):
         result = train_joint(inputs, config, render, body, body_models, prior_kind,
                              ctx.section(section) if section else None, compute.seed, device,
-                             FrameCacheSize(compute.frame_cache, compute.frame_read_ahead), ctx.work, key, ctx.out,
+                             FrameCacheSize(compute.frame_cache, compute.frame_read_ahead,
+                                            compute.lpips_target_cache_mb), ctx.work, key, ctx.out,
                              dirs["05_textual_inversion"])
     for person in result.people:
         folder = ctx.out / "humans" / person.pid
