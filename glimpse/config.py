@@ -38,12 +38,13 @@ STAGE_NAMES = ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textua
                "07_eval")
 # libyaml's parser when PyYAML was built with it (the wheels are): the same documents, about 15x faster than the
 # pure-Python one (pipeline.yaml: 4 ms against 74; every stage process reads it several times)
-_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_HAS_LIBYAML = hasattr(yaml, "CSafeLoader")
 
 
 def safe_load_yaml(text: str) -> Any:
-    """``yaml.safe_load`` of ``text`` (raises yaml.YAMLError as it does)."""
-    return yaml.load(text, Loader=_YAML_LOADER)
+    """``yaml.safe_load`` of ``text``, with libyaml's safe loader where there is one (raises yaml.YAMLError as
+    safe_load does)."""
+    return yaml.load(text, Loader=yaml.CSafeLoader if _HAS_LIBYAML else yaml.SafeLoader)
 
 
 def pipeline_yaml_path() -> Path:
