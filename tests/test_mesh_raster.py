@@ -91,6 +91,28 @@ def test_the_cpp_z_buffer_equals_the_numpy_reference_to_the_bit():
         vars(_numpy_meshes(meshes, faces, K, 320, 240)).values()))
 
 
+@pytest.mark.skipif(not available(), reason="the C++ kernel does not build here")
+def test_the_cpp_z_buffer_follows_numpy_on_broken_coordinates():
+    """Coordinates that are not finite, or so large that products overflow or boxes leave any integer range: the
+    kernel gives what numpy gives (nothing covered here), instead of walking or writing outside the image."""
+    K = np.array([[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]])
+    good = np.array([[-0.3, -0.3, 2.0], [0.3, -0.3, 2.0], [0.0, 0.3, 2.0]])
+    cases = {"nan": [[np.nan, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 1.0]],
+             "minus inf": [[-np.inf, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 1.0]],
+             "inf": [[np.inf, 0.0, 1.0], [np.inf, 0.1, 1.0], [np.inf, 0.2, 1.0]],
+             "beyond int64": [[1e18, 0.0, 1.0], [2e18, 0.0, 1.0], [1e18, 0.2, 1.0]],
+             "overflowing": [[-1e200, -1e200, 1.0], [1e200, -1e200, 1.0], [0.0, 1e200, 1.0]]}
+    for name, corners in cases.items():
+        points = np.concatenate([np.array(corners, float), good])
+        faces = np.array([[0, 1, 2], [3, 4, 5]])
+        kernel = rasterize_triangles(points, faces, K, 64, 48, use_kernel=True)
+        with np.errstate(all="ignore"):  # numpy's overflow and invalid-value warnings are expected here
+            reference = rasterize_triangles(points, faces, K, 64, 48, use_kernel=False)
+        assert np.array_equal(kernel.face, reference.face), name
+        assert np.array_equal(kernel.depth, reference.depth), name
+        assert set(np.unique(kernel.face)) == {-1, 1}, name  # the good triangle only
+
+
 def _numpy_meshes(meshes, faces, K, width, height):
     return rasterize_triangles(np.concatenate(meshes), np.concatenate([faces + k * len(meshes[0])
                                                                        for k in range(len(meshes))]),

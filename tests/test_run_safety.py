@@ -48,8 +48,10 @@ UNSAFE_LOADS = [
     (re.compile(r"weights_only\s*=\s*False"), "torch.load must keep weights_only=True"),
     (re.compile(r"allow_pickle\s*=\s*True"), "numpy archives are read without pickle"),
     (re.compile(r"\bpickle\.loads?\("), "pickles go through a restricted Unpickler subclass"),
-    (re.compile(r"\byaml\.unsafe_load\(|\byaml\.load\((?![^#]*Loader=yaml\.C?SafeLoader\b)"),
-     "YAML is read with a safe loader (yaml.safe_load, or yaml.load with Loader=yaml.SafeLoader or CSafeLoader)"),
+    (re.compile(r"\byaml\.(?:unsafe_load|full_load|load_all|unsafe_load_all|full_load_all)\(|"
+                r"\byaml\.load\((?!\w+, Loader=(?:yaml\.CSafeLoader if \w+ else )?yaml\.SafeLoader\))"),
+     "YAML is read with a safe loader (yaml.safe_load, or yaml.load(x, Loader=yaml.SafeLoader), where libyaml's "
+     "CSafeLoader may stand first: yaml.CSafeLoader if ... else yaml.SafeLoader)"),
     (re.compile(r"shell\s*=\s*True"), "subprocesses get argument lists, never a shell"),
     (re.compile(r"\bos\.system\(|\bos\.popen\("), "subprocesses get argument lists, never a shell"),
     (re.compile(r"(?<![\w.])(?:eval|exec)\("), "no code is built from text"),

@@ -37,6 +37,7 @@ PARAMS_FORMAT = "glimpse-params/1"
 INPUTS_FORMAT = "glimpse-inputs/1"
 VALIDATION_CACHE_FORMAT = "glimpse-validation-cache/2"
 HASH_CACHE_FORMAT = "glimpse-hash-cache/2"
+VALIDATOR_HELPERS = ("io/images.py", "config.py")  # files outside glimpse/scene whose code decides a validation
 # The environment variable naming a run lock handed down to child processes, and the one saying how long to
 # wait for a busy run folder.
 RUN_LOCK_ENV = "GLIMPSE_RUN_LOCK"
@@ -125,7 +126,10 @@ def validate_cached(scene_root: Path, cache_dir: Path) -> None:
 
     scene_root = scene_root.resolve()
     fingerprint = hashlib.sha256()
-    fingerprint.update(_code_hash(Path(__file__).resolve().parent.parent / "scene").encode())
+    package = Path(__file__).resolve().parent.parent
+    fingerprint.update(_code_hash(package / "scene").encode())
+    for helper in VALIDATOR_HELPERS:  # the image and YAML readers the validator goes through
+        fingerprint.update(hashlib.sha256((package / helper).read_bytes()).hexdigest().encode())
     for rel in _scene_files(scene_root):
         fingerprint.update(f"{rel}:{_stat_key(scene_root / rel)}\n".encode())
     key = hashlib.sha1(str(scene_root).encode()).hexdigest()[:16]

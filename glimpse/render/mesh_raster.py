@@ -53,9 +53,15 @@ def rasterize_triangles(points: np.ndarray, faces: np.ndarray, K: np.ndarray, wi
 
 
 def _kernel_available() -> bool:
+    """Whether the C++ kernels load (they are built once per environment, whatever ``render.backend`` says: this
+    is not the Gaussian rasterizer); while another process builds them, numpy serves instead of waiting."""
+    from glimpse.locks import LockBusy
     from glimpse.render.composite_cpu import available
 
-    return available()
+    try:
+        return available()
+    except LockBusy:
+        return False
 
 
 def _rasterize_numpy(points: np.ndarray, faces: np.ndarray, K: np.ndarray, width: int, height: int, near: float

@@ -1,7 +1,9 @@
 // Which triangle is nearest at each pixel centre, and at what depth: the z-buffer of glimpse/render/mesh_raster.py,
 // whose numpy version is the reference. Each triangle in front of the camera is projected, and every pixel centre of
-// its box tested against its three edges; the nearest surface is kept, ties to the lower face index. The arithmetic is numpy's, in float64 and in the same order, without fused multiply-adds, so the
-// result equals the reference to the bit (tests/test_mesh_raster.py).
+// its box tested against its three edges; the nearest surface is kept, ties to the lower face index. The arithmetic
+// is numpy's, in float64 and in the same order, without fused multiply-adds and with IEEE infinities and NaNs (this
+// file opts out of the build's -ffinite-math-only), so the result equals the reference to the bit, broken input
+// included (tests/test_mesh_raster.py).
 #include <torch/extension.h>
 
 #include <algorithm>
@@ -9,8 +11,12 @@
 #include <limits>
 #include <vector>
 
+// numpy rounds each product and each sum, and compares NaNs as IEEE says: so must this
 #pragma GCC push_options
-#pragma GCC optimize("fp-contract=off")  // numpy rounds each product and each sum: so must this
+#pragma GCC optimize("fp-contract=off", "no-finite-math-only")
+#ifdef __clang__
+#pragma clang fp contract(off)
+#endif
 
 namespace {
 
@@ -25,8 +31,8 @@ inline double edge(double px, double py, double qx, double qy, double u, double 
 
 // points [V, 3] float64, camera coordinates; faces [F, 3] int64; fx, fy, cx, cy: the pinhole's K; near: the camera z
 // at or below which a corner drops its triangle. Returns depth [H, W] float64 (inf where no triangle) and face [H, W]
-// int64, the index into faces (-1 where none; compared through the face, not the infinity, which the build's
-// -ffinite-math-only rules out).
+// int64, the index into faces (-1 where none). A triangle with a coordinate that is not finite covers nothing, as
+// in numpy, where its edge tests fail.
 std::vector<torch::Tensor> mesh_raster_forward(torch::Tensor points, torch::Tensor faces, double fx, double fy,
                                                double cx, double cy, double near, int64_t width, int64_t height) {
   TORCH_CHECK(points.dtype() == torch::kFloat64 && faces.dtype() == torch::kInt64 && points.dim() == 2 &&
@@ -54,17 +60,22 @@ std::vector<torch::Tensor> mesh_raster_forward(torch::Tensor points, torch::Tens
       inv_z[k] = 1.0 / p[2];
     }
     if (!in_front) continue;
+    bool finite = true;
+    for (int k = 0; k < 3; ++k) finite = finite && std::isfinite(u[k]) && std::isfinite(v[k]) && std::isfinite(inv_z[k]);
+    if (!finite) continue;
     const double area = (u[1] - u[0]) * (v[2] - v[0]) - (v[1] - v[0]) * (u[2] - u[0]);
     const double size = std::fabs(area);
     if (!(size > kMinArea)) continue;
     const double sign = area < 0 ? -1.0 : 1.0;
-    // the pixel centres of the triangle's box, clipped to the image
-    const int64_t u_first = static_cast<int64_t>(std::max(std::ceil(std::min({u[0], u[1], u[2]})), 0.0));
-    const int64_t v_first = static_cast<int64_t>(std::max(std::ceil(std::min({v[0], v[1], v[2]})), 0.0));
-    const int64_t u_last = static_cast<int64_t>(std::min(std::floor(std::max({u[0], u[1], u[2]})),
-                                                         static_cast<double>(width - 1)));
-    const int64_t v_last = static_cast<int64_t>(std::min(std::floor(std::max({v[0], v[1], v[2]})),
-                                                         static_cast<double>(height - 1)));
+    // the pixel centres of the triangle's box, clipped to the image in float64 (a box off the image, however far,
+    // is empty before any conversion to an integer)
+    const double u_lo = std::max(std::ceil(std::min({u[0], u[1], u[2]})), 0.0);
+    const double v_lo = std::max(std::ceil(std::min({v[0], v[1], v[2]})), 0.0);
+    const double u_hi = std::min(std::floor(std::max({u[0], u[1], u[2]})), static_cast<double>(width - 1));
+    const double v_hi = std::min(std::floor(std::max({v[0], v[1], v[2]})), static_cast<double>(height - 1));
+    if (!(u_lo <= u_hi && v_lo <= v_hi)) continue;
+    const int64_t u_first = static_cast<int64_t>(u_lo), u_last = static_cast<int64_t>(u_hi);
+    const int64_t v_first = static_cast<int64_t>(v_lo), v_last = static_cast<int64_t>(v_hi);
     for (int64_t y = v_first; y <= v_last; ++y) {
       for (int64_t x = u_first; x <= u_last; ++x) {
         const double X = static_cast<double>(x), Y = static_cast<double>(y);
@@ -75,7 +86,7 @@ std::vector<torch::Tensor> mesh_raster_forward(torch::Tensor points, torch::Tens
         const double d = 1.0 / (wa / size * inv_z[0] + wb / size * inv_z[1] + wc / size * inv_z[2]);
         const int64_t q = y * width + x;
         // faces come in ascending order: an equal depth keeps the lower index
-        if (face_ptr[q] < 0 || d < depth_ptr[q]) {
+        if (face_ptr[q] < 0 || d < depth_ptr[q]) {  // (a first cover counts even at infinite depth, as in numpy)
           depth_ptr[q] = d;
           face_ptr[q] = f;
         }
