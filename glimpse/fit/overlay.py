@@ -47,22 +47,21 @@ def overlay_frame(image: np.ndarray, camera: PinholeCamera, faces: np.ndarray, b
         depth_all.append(cam[front, 2])
         pixels_all.append(np.round(uv).astype(np.int64))
         colours_all.append(shade[front, None] * np.asarray(body.colour, float))
-    out = image.astype(np.float64)
+    result = np.array(image, dtype=np.uint8, copy=True)
     if depth_all:
         depth, pixels, colours = np.concatenate(depth_all), np.concatenate(pixels_all), np.concatenate(colours_all)
         u = np.concatenate([pixels[:, 0] + du for du, _ in SPLAT_OFFSETS])
         v = np.concatenate([pixels[:, 1] + dv for _, dv in SPLAT_OFFSETS])
         splat_depth, splat_colour = np.tile(depth, len(SPLAT_OFFSETS)), np.tile(colours, (len(SPLAT_OFFSETS), 1))
         inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-        near_first = np.argsort(splat_depth[inside], kind="stable")
-        linear = (v[inside] * width + u[inside])[near_first]
-        _, first = np.unique(linear, return_index=True)  # the nearest splat of each pixel
-        painted = np.full((height * width, 3), np.nan)
-        painted[linear[first]] = splat_colour[inside][near_first][first]
-        painted = painted.reshape(height, width, 3)
-        hit = ~np.isnan(painted[..., 0])
-        out[hit] = (1 - OVERLAY_OPACITY) * out[hit] + OVERLAY_OPACITY * painted[hit]
-    result = np.clip(np.round(out), 0, 255).astype(np.uint8)
+        linear = v[inside] * width + u[inside]
+        order = np.lexsort((splat_depth[inside], linear))  # by pixel, nearest first (ties: the earlier splat)
+        linear = linear[order]
+        first = np.flatnonzero(np.r_[True, linear[1:] != linear[:-1]])  # the nearest splat of each pixel
+        hit = linear[first]
+        flat = result.reshape(-1, 3)  # only the painted pixels change
+        blended = (1 - OVERLAY_OPACITY) * flat[hit].astype(np.float64) + OVERLAY_OPACITY * splat_colour[inside][order[first]]
+        flat[hit] = np.clip(np.round(blended), 0, 255).astype(np.uint8)
     for body in bodies:
         if body.keypoints is None:
             continue
