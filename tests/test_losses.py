@@ -152,12 +152,12 @@ def test_masked_lpips_zeroes_both_images_outside_the_mask(lpips_modules) -> None
 @pytest.mark.parametrize("net", ["alex", "vgg"])
 def test_lpips_against_kept_target_features_is_the_same_loss_to_the_bit(lpips_modules, net: str) -> None:
     """Stage 06 keeps each frame's target features: the loss and its gradient must not change."""
-    from glimpse.metrics.losses import lpips_loss_to_features
+    from glimpse.metrics.losses import lpips_loss_target, lpips_loss_to_features
 
     pred, target, mask = images(5, (1, 40, 56, 3))
     pred, target, mask = pred[0], target[0], mask[0]
     module = lpips_modules[net]
-    features = module.target_features(target * mask.unsqueeze(-1).float())
+    features = lpips_loss_target(module, target, mask)
     values, grads = [], []
     for loss_of in (lambda x: lpips_loss(module, x, target, mask),
                     lambda x: lpips_loss_to_features(module, x, features, mask)):

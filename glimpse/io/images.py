@@ -106,11 +106,15 @@ def decode_image(path: str | Path) -> tuple[ImageInfo, Image.Image]:
         raise ImageReadError("not an image file that Pillow recognises") from err
     except Exception as err:  # Pillow raises OSError, SyntaxError, ValueError, ...
         raise ImageReadError(f"cannot decode the image ({err})") from err
-    depth = _png_bit_depth(data)
-    if depth is None:
-        depth = _MODE_BITS.get(image.mode, 8)
-    info = ImageInfo(image.format, image.mode, image.width, image.height, depth)
-    return info, image
+    return _image_info(image, data), image
+
+
+def _image_info(image: Image.Image, head: bytes) -> ImageInfo:
+    """What ``image`` (opened by Pillow) holds; ``head``: the file's first bytes (26 suffice), whose PNG header
+    gives the sample bit depth Pillow does not report."""
+    depth = _png_bit_depth(head)
+    return ImageInfo(image.format, image.mode, image.width, image.height,
+                     _MODE_BITS.get(image.mode, 8) if depth is None else depth)
 
 
 def read_image_header(path: str | Path) -> ImageInfo:
@@ -118,11 +122,10 @@ def read_image_header(path: str | Path) -> ImageInfo:
     file already checked by ``decode_image``). Raises :class:`ImageReadError` when the header does not parse."""
     try:
         with open(path, "rb") as file:
-            depth = _png_bit_depth(file.read(26))
+            head = file.read(26)
             file.seek(0)
             with Image.open(file) as image:
-                info = ImageInfo(image.format, image.mode, image.width, image.height,
-                                 _MODE_BITS.get(image.mode, 8) if depth is None else depth)
+                info = _image_info(image, head)
     except OSError as err:
         raise ImageReadError(f"cannot read the image's header ({err.strerror or err})") from err
     except Exception as err:  # Pillow raises UnidentifiedImageError, SyntaxError, ValueError, ...

@@ -36,7 +36,14 @@ from glimpse.gaussians.training import SEED_STRIDE, scene_extent, training_backg
 from glimpse.humans.compose import frame_gaussians, render_frame
 from glimpse.humans.person import PersonGaussians
 from glimpse.joint.config import JointConfig
-from glimpse.metrics.losses import dssim_loss_on, hard_surface_loss, lpips_loss, lpips_loss_to_features, mse_loss
+from glimpse.metrics.losses import (
+    dssim_loss_on,
+    hard_surface_loss,
+    lpips_loss,
+    lpips_loss_target,
+    lpips_loss_to_features,
+    mse_loss,
+)
 from glimpse.metrics.lpips import LPIPS
 from glimpse.prior.base import UnseenPrior
 from glimpse.render import Camera, RenderOutput
@@ -99,8 +106,7 @@ def lpips_target_features(lpips_module: LPIPS, target: Tensor, keep: Tensor, box
     """The LPIPS features ``reconstruction_terms`` compares the render with: ``target [H, W, 3]`` inside ``box``,
     black where ``keep`` is not set."""
     y0, y1, x0, x1 = box
-    inside = keep[y0:y1, x0:x1].to(target.dtype).unsqueeze(-1)
-    return lpips_module.target_features(target[y0:y1, x0:x1] * inside)
+    return lpips_loss_target(lpips_module, target[y0:y1, x0:x1], keep[y0:y1, x0:x1])
 
 
 class JointTrainer(GaussianTrainer):

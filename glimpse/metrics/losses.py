@@ -72,23 +72,29 @@ def lpips_loss(lpips_module: LPIPS, pred: Tensor, target: Tensor, mask: Tensor |
     pred, target: ``[B, H, W, 3]`` or ``[H, W, 3]``; mask: optional ``[B, H, W]`` / ``[H, W]``:
     both images are multiplied by it (black outside) before LPIPS.
     """
-    if mask is not None:
-        if mask.shape != pred.shape[:-1]:
-            raise ValueError(f"mask must be {tuple(pred.shape[:-1])}, found {tuple(mask.shape)}")
-        weights = mask.to(device=pred.device, dtype=pred.dtype).unsqueeze(-1)
-        pred, target = pred * weights, target * weights.to(target.dtype)
-    return lpips_module(pred, target).mean()
+    return lpips_module(_lpips_masked(pred, mask), _lpips_masked(target, mask)).mean()
+
+
+def lpips_loss_target(lpips_module: LPIPS, target: Tensor, mask: Tensor | None = None) -> list[Tensor]:
+    """The target's side of ``lpips_loss`` for one ``target [H, W, 3]`` (and ``mask [H, W]``): its LPIPS
+    features, computed once for a target the loss meets again and again (``lpips_loss_to_features``)."""
+    return lpips_module.target_features(_lpips_masked(target, mask))
 
 
 def lpips_loss_to_features(lpips_module: LPIPS, pred: Tensor, target_features: list[Tensor],
                            mask: Tensor | None = None) -> Tensor:
-    """``lpips_loss`` of one ``pred [H, W, 3]`` against a target given by ``lpips_module.target_features`` of
-    the target, already multiplied by ``mask [H, W]`` when there is one (the same value, to the bit)."""
-    if mask is not None:
-        if mask.shape != pred.shape[:-1]:
-            raise ValueError(f"mask must be {tuple(pred.shape[:-1])}, found {tuple(mask.shape)}")
-        pred = pred * mask.to(device=pred.device, dtype=pred.dtype).unsqueeze(-1)
-    return lpips_module.distance_to_features(pred, target_features)
+    """``lpips_loss`` of one ``pred [H, W, 3]`` against the target whose ``lpips_loss_target`` (with the same
+    ``mask``) these features are: the same value, to the bit."""
+    return lpips_module.distance_to_features(_lpips_masked(pred, mask), target_features)
+
+
+def _lpips_masked(image: Tensor, mask: Tensor | None) -> Tensor:
+    """``image [..., H, W, 3]`` black outside ``mask [..., H, W]`` (unchanged without one)."""
+    if mask is None:
+        return image
+    if mask.shape != image.shape[:-1]:
+        raise ValueError(f"mask must be {tuple(image.shape[:-1])}, found {tuple(mask.shape)}")
+    return image * mask.to(device=image.device, dtype=image.dtype).unsqueeze(-1)
 
 
 def hard_surface(alpha: Tensor) -> Tensor:

@@ -94,7 +94,8 @@ STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # Parameters that decide how a stage runs, not what it produces (dotted; the section may be a pattern):
 # kept out of the .params stamps, so changing them reruns nothing. Threads change at most float rounding
 # (and COLMAP's results when 01_sfm.deterministic is false); checkpoints only where a run may resume; the frame
-# cache and the LPIPS features kept with it only what is kept in memory; compute.auto_schedule_scale is already in the schedule_scale it resolved.
+# cache and the LPIPS features kept with it only what is kept in memory; compute.auto_schedule_scale is already in
+# the schedule_scale it resolved.
 NOT_RESULT_KEYS: tuple[str, ...] = ("compute.threads", "compute.frame_cache", "compute.frame_read_ahead",
                                      "compute.lpips_target_cache_mb", "compute.auto_schedule_scale",
                                      "*.checkpoint_every")
