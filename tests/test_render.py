@@ -130,6 +130,34 @@ def test_cpu_projection_backward_with_outputs_the_loss_does_not_read():
 
 
 @needs_cpu_kernel
+@pytest.mark.parametrize("active", [1, 3, 4, 11])
+def test_the_backward_matches_the_reference_for_any_number_of_active_channels(active):
+    """The kernel's backward has walks compiled for 3 and 4 active channels (colour; colour over a background) and
+    one for any other count, and sums each Gaussian's per-lane sums (6 + active of them) in groups of eight: 11
+    active channels take three groups."""
+    params, cam = scene("random"), camera()
+    features = torch.rand(len(params["colors"]), active + 1, generator=torch.Generator().manual_seed(5))
+    weights = torch.rand(active + 1, generator=torch.Generator().manual_seed(6)) + 0.5
+    weights[0] = 0.0  # one channel without a gradient: the active ones are not the first ones
+    grads = {}
+    for backend in ("torch", "cpu"):
+        leaves = {k: v.clone().requires_grad_(True) for k, v in params.items() if k != "colors"}
+        leaves["features"] = features.clone().requires_grad_(True)
+        p = project_gaussians(leaves["means"], quat_scale_to_covariance(leaves["quats"], leaves["scales"]),
+                              leaves["opacities"], cam)
+        bins = bin_gaussians(p.means2d, p.extents, p.depths, p.visible, cam.width, cam.height, 16)
+        composite = composite_cpu if backend == "cpu" else composite_torch
+        args = (p.means2d, p.conics, p.opacities, leaves["features"])
+        image = (composite(*args, p.extents, bins, cam.width, cam.height) if backend == "cpu"
+                 else composite(*args, bins, cam.width, cam.height))
+        (image * weights).sum().backward()
+        grads[backend] = {k: v.grad for k, v in leaves.items()}
+    for name, reference in grads["torch"].items():
+        assert_grad_close(reference, grads["cpu"][name], name)
+    assert torch.equal(grads["cpu"]["features"][:, 0], torch.zeros(len(features)))
+
+
+@needs_cpu_kernel
 def test_a_loss_on_colour_alone_gets_the_reference_gradients():
     """The kernel's backward skips channels whose gradient is zero everywhere (here red and two extra channels, as
     alpha and depth are when a loss reads colour alone): the gradients are still the reference's, and zero for

@@ -17,10 +17,10 @@
 // same pixels (no store forwarding); written this way the forward is about 1.2x faster. Each Gaussian's
 // inputs are first packed into one record (a cache line for up to 8 channels), fetched a few list entries
 // ahead. A pixel that has stopped keeps its transmittance negated (one array, no separate live mask). The
-// backward walks each tile back to front the same way, keeps one running sum per channel and
-// pixel of the colour behind (gsplat's form of d pixel / d alpha), sums each Gaussian's gradients per lane
-// (one horizontal sum per Gaussian and tile), keeps per-thread gradient buffers (no atomics) and sums
-// them in parallel. Channels whose gradient is zero at every pixel are left out of its walk.
+// backward walks each tile back to front the same way, keeps one running sum per pixel of the colour
+// behind dotted with the image's gradient (gsplat's form of d pixel / d alpha, contracted), sums per lane the
+// moments that give each Gaussian's gradients (one transposed horizontal sum per Gaussian and tile), keeps
+// per-thread gradient buffers (no atomics) and sums them in parallel. Channels whose gradient is zero at every pixel are left out of its walk.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 #include <omp.h>
@@ -186,20 +186,16 @@ inline int lane_bits(Ints mask) {  // bit i set where lane i of a comparison's r
 }
 inline int count_lanes(Ints mask) { return __builtin_popcount(static_cast<unsigned>(lane_bits(mask))); }
 inline bool any_lane(Ints mask) { return lane_bits(mask) != 0; }
-inline float sum_lanes(Floats v) {  // a fixed tree of pairwise sums: the same sum on every build and run
-  v += __builtin_shuffle(v, Ints{4, 5, 6, 7, 0, 1, 2, 3});
-  v += __builtin_shuffle(v, Ints{2, 3, 0, 1, 6, 7, 4, 5});
-  v += __builtin_shuffle(v, Ints{1, 0, 3, 2, 5, 4, 7, 6});
-  return v[0];
-}
 
 // exp(x) for x <= 0 on every lane: Cephes' expf, about 1 ulp. x = n ln2 + r, |r| <= ln2 / 2, e^r by a
-// degree-6 polynomial, times 2^n built in the exponent bits (n = floor by truncation, corrected below zero).
+// degree-6 polynomial, times 2^n built in the exponent bits. n = round(x / ln2) is taken by adding 1.5 2^23: the sum
+// lies in [2^23, 2^24), where floats are the integers, so the addition rounds to n and the sum's low bits hold it
+// (no conversion instructions: they were a third of the backward's time with the exp).
+constexpr float kRoundingShift = 12582912.0f;  // 1.5 2^23
 inline Floats fast_exp(Floats x) {
   x = max(x, Floats{} - 87.0f);  // keeps 2^n a normal float
-  const Floats y = x * 1.44269504088896341f + 0.5f;
-  Floats n = __builtin_convertvector(__builtin_convertvector(y, Ints), Floats);
-  n = n > y ? n - 1.0f : n;  // truncation rounds negatives up
+  const Floats shifted = x * 1.44269504088896341f + kRoundingShift;
+  const Floats n = shifted - kRoundingShift;
   const Floats r = x - n * 0.693359375f + n * 2.12194440e-4f;
   Floats p = Floats{} + 1.9875691500e-4f;
   p = p * r + 1.3981999507e-3f;
@@ -208,7 +204,11 @@ inline Floats fast_exp(Floats x) {
   p = p * r + 1.6666665459e-1f;
   p = p * r + 5.0000001201e-1f;
   p = p * r * r + r + 1.0f;
-  const Ints bits = (__builtin_convertvector(n, Ints) + 127) << 23;
+  // the sum's bits are those of 1.5 2^23 plus n: shifted left by 23, the constant's bits leave the word (its lowest
+  // set bit is bit 22), and n + 127 lands in the exponent
+  Ints bits;
+  std::memcpy(&bits, &shifted, sizeof bits);
+  bits = (bits + 127) << 23;
   Floats scale;
   std::memcpy(&scale, &bits, sizeof scale);
   return p * scale;
@@ -310,14 +310,45 @@ inline BoxStep box_step(const TileGaussian& t, int64_t x0, int64_t y0, int j) {
   return {t.my - static_cast<float>(y0 + (j >> 1)), x8, j * kLanes, t.mx - static_cast<float>(x0 + x8) - kLaneOffsets};
 }
 
+// The number of per-lane sums a Gaussian's backward keeps (6 for its geometry, one per active channel), padded to whole
+// groups of eight for sum_lanes8.
+inline int64_t sum_vectors(int64_t active) { return (6 + active + kLanes - 1) / kLanes * kLanes; }
+
+// The sums of eight vectors' lanes, as one vector [sum v[0], ..., sum v[7]], each by a fixed tree of pairwise sums
+// (lanes i and i + 4, then i and i + 2, then i and i + 1: the same sums on every build and run), in 14 shuffles and 7
+// additions for all eight where one vector at a time takes 3 of each.
+inline Floats sum_lanes8(const Floats* v) {
+  Floats halves[4], quarters[2];
+  for (int k = 0; k < 4; ++k)
+    halves[k] = __builtin_shuffle(v[k], v[k + 4], Ints{0, 1, 2, 3, 8, 9, 10, 11}) +
+                __builtin_shuffle(v[k], v[k + 4], Ints{4, 5, 6, 7, 12, 13, 14, 15});
+  for (int k = 0; k < 2; ++k)
+    quarters[k] = __builtin_shuffle(halves[2 * k], halves[2 * k + 1], Ints{0, 1, 8, 9, 4, 5, 12, 13}) +
+                  __builtin_shuffle(halves[2 * k], halves[2 * k + 1], Ints{2, 3, 10, 11, 6, 7, 14, 15});
+  return __builtin_shuffle(quarters[0], quarters[1], Ints{0, 2, 8, 10, 4, 6, 12, 14}) +
+         __builtin_shuffle(quarters[0], quarters[1], Ints{1, 3, 9, 11, 5, 7, 13, 15});
+}
+
 // The backward's walk of one tile, back to front, from its state (T: final transmittances; behind: zeros; dL_tile:
 // the image's gradient of the active channels), adding each Gaussian's gradients to `grads` [N, stride].
-// feature_lanes [A] and f_active [A]: scratch for one Gaussian's per-lane feature gradients and active features.
+// sums [sum_vectors(A)] (vectors), totals [sum_vectors(A)] and f_active [A]: scratch for one Gaussian's per-lane
+// sums, their totals and its active features.
+//
+// With the image's gradient dL, a Gaussian's alpha at a pixel gets dL . (f T - B / (1 - alpha)) (gsplat's form; B the
+// colour of the contributors behind it, sum f_j alpha_j T_j): the walk keeps, per pixel, that colour already dotted
+// with dL (one running sum instead of one per channel). Its exponent's gradient is o G d_alpha where alpha = o G is
+// not clamped; the sums over the pixels of h = G d_alpha and of its moments dx h, dx^2 h, dy h, dx dy h, dy^2 h give,
+// once the tile is walked, the opacity's, the mean's and the conic's gradients (power = -0.5 (a dx^2 + c dy^2) - b dx dy).
+template <int kActive>  // the number of active channels, or 0: given by `active` at run time
 void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last, const std::vector<int64_t>& active,
                    float* __restrict T, const int* __restrict n_last, float* __restrict behind,
                    const float* __restrict dL_tile, float* __restrict grads, int64_t stride,
-                   Floats* __restrict feature_lanes, float* __restrict f_active) {
-  const int64_t A = static_cast<int64_t>(active.size());
+                   Floats* __restrict sums, float* __restrict totals, float* __restrict f_active) {
+  const int64_t A = kActive > 0 ? kActive : static_cast<int64_t>(active.size());
+  Floats local_lanes[kActive > 0 ? kActive : 1];  // with the count known, held in registers
+  Floats* __restrict feature_lanes;  // per active channel: sum of w dL
+  if constexpr (kActive > 0) feature_lanes = local_lanes; else feature_lanes = sums + 6;
+  const int64_t sum_count = 6 + A, sum_count_padded = sum_vectors(A);
   TileEntry upcoming = max_last > 0 ? tile_entry(in, in.ids[start + max_last - 1], r) : TileEntry{};
   for (int e = start + max_last - 1; e >= start; --e) {  // back to front
     const int g = in.ids[e];
@@ -331,49 +362,60 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
     __builtin_prefetch(gg, 1);
     __builtin_prefetch(gg + stride - 1, 1);
     bool touched = false;  // whether any lane of the box is hit
-    // the gradients' lanes: mean x, y; conic a, b, c; opacity
-    Floats g_mx{}, g_my{}, g_a{}, g_b{}, g_c{}, g_o{};
+    // the lanes of the sums of h, dx h, dx^2 h, dy h, dx dy h, dy^2 h
+    Floats s_h{}, s_xh{}, s_xxh{}, s_yh{}, s_xyh{}, s_yyh{};
     std::fill(feature_lanes, feature_lanes + A, Floats{});
     for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
+    float f_local[kActive > 0 ? kActive : 1];
+    if constexpr (kActive > 0) std::copy(f_active, f_active + kActive, f_local);
+    const Ints columns[2] = {(kLaneIndices >= tg.xa) & (kLaneIndices < tg.xb),
+                             (kLaneIndices + kLanes >= tg.xa) & (kLaneIndices + kLanes < tg.xb)};
     for (uint32_t steps = now.steps; steps != 0; steps &= steps - 1) {
-      const auto [dy, x8, base, dx] = box_step(tg, r.x0, r.y0, __builtin_ctz(steps));
+      const int j = __builtin_ctz(steps);
+      const auto [dy, x8, base, dx] = box_step(tg, r.x0, r.y0, j);
       const Floats power = gaussian_power(tg, dx, dy);
       const Floats G = fast_exp(min(power, Floats{}));
       const Floats alpha = min(Floats{} + kAlphaMax, tg.o * G);
-      const Ints column = x8 + kLaneIndices;
-      const Ints hit = (column >= tg.xa) & (column < tg.xb) & (index < load(n_last + base)) &
-                       (power <= 0.0f) & (alpha >= kAlphaMin);
+      const Ints hit = columns[j & 1] & (index < load(n_last + base)) & (power <= 0.0f) & (alpha >= kAlphaMin);
       touched |= any_lane(hit);  // no branch: skipping a group that no lane hits was a mispredicted branch
-      // d pixel / d alpha_i = f_i T_i - B_i / (1 - alpha_i), B_i = sum over the contributors j behind i of
-      // f_j alpha_j T_j (gsplat's form): one running sum per channel and pixel
       const Floats keep = 1.0f / (1.0f - alpha);
       const Floats t_behind = load(T + base);
       const Floats t = hit ? t_behind * keep : t_behind;  // transmittance in front of it
       store(T + base, t);
       const Floats w = hit ? alpha * t : 0.0f;
-      Floats d_alpha{};  // lanes not hit are masked off below (`free`)
+      Floats f_dot{};  // f . dL
       for (int64_t i = 0; i < A; ++i) {
-        const float f = f_active[i];
-        float* bp = behind + i * kTilePixels + base;
-        const Floats dLp = load(dL_tile + i * kTilePixels + base), behind_now = load(bp);
+        const Floats dLp = load(dL_tile + i * kTilePixels + base);
+        f_dot += (kActive > 0 ? f_local[i] : f_active[i]) * dLp;
         feature_lanes[i] += w * dLp;
-        d_alpha += (f * t - behind_now * keep) * dLp;
-        store(bp, behind_now + f * w);  // w = 0 where not hit: unchanged
       }
+      const Floats behind_now = load(behind + base);
+      const Floats d_alpha = f_dot * t - behind_now * keep;  // lanes not hit are masked off below (`free`)
+      store(behind + base, behind_now + w * f_dot);  // w = 0 where not hit: unchanged
       // a clamped alpha does not depend on o or the Gaussian
-      const Ints free = hit & (tg.o * G <= kAlphaMax);
-      const Floats d_power = free ? d_alpha * alpha : 0.0f;
-      g_mx += -(tg.a * dx + tg.b * dy) * d_power;
-      g_my += -(tg.b * dx + tg.c * dy) * d_power;
-      g_a += -0.5f * dx * dx * d_power;
-      g_b += -dx * dy * d_power;
-      g_c += -0.5f * dy * dy * d_power;
-      g_o += free ? G * d_alpha : 0.0f;
+      const Floats h = hit & (tg.o * G <= kAlphaMax) ? G * d_alpha : 0.0f;
+      const Floats xh = dx * h;
+      s_h += h;
+      s_xh += xh;
+      s_xxh += dx * xh;
+      s_yh += dy * h;
+      s_xyh += dy * xh;
+      s_yyh += (dy * dy) * h;
     }
     if (touched) {
-      const Floats geometry[6] = {g_mx, g_my, g_a, g_b, g_c, g_o};
-      for (int j = 0; j < 6; ++j) gg[j] += sum_lanes(geometry[j]);
-      for (int64_t i = 0; i < A; ++i) gg[6 + active[i]] += sum_lanes(feature_lanes[i]);
+      if constexpr (kActive > 0) std::copy(local_lanes, local_lanes + kActive, sums + 6);
+      sums[0] = s_h, sums[1] = s_xh, sums[2] = s_xxh, sums[3] = s_yh, sums[4] = s_xyh, sums[5] = s_yyh;
+      std::fill(sums + sum_count, sums + sum_count_padded, Floats{});
+      for (int64_t k = 0; k < sum_count_padded; k += kLanes) store(totals + k, sum_lanes8(sums + k));
+      const float o = tg.o, sh = totals[0], sxh = totals[1], sxxh = totals[2], syh = totals[3], sxyh = totals[4],
+                  syyh = totals[5];
+      gg[0] += -o * (tg.a * sxh + tg.b * syh);  // mean x: d power / d mx = -(a dx + b dy)
+      gg[1] += -o * (tg.b * sxh + tg.c * syh);  // mean y
+      gg[2] += -0.5f * o * sxxh;                 // conic a
+      gg[3] += -o * sxyh;                        // conic b
+      gg[4] += -0.5f * o * syyh;                 // conic c
+      gg[5] += sh;                               // opacity: d alpha / d o = G
+      for (int64_t i = 0; i < A; ++i) gg[6 + active[i]] += totals[6 + i];
     }
   }
 }
@@ -503,11 +545,11 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
     // channel active[i])
     alignas(64) float T[kTilePixels];
     alignas(64) int n_last[kTilePixels];
-    std::vector<float> storage(2 * A * kTilePixels);
-    float* __restrict behind = storage.data();            // colour of the contributors behind: sum f_j alpha_j T_j
-    float* __restrict dL_tile = behind + A * kTilePixels;  // the image's gradient
-    std::vector<Floats> feature_lanes(A);
-    std::vector<float> f_active(A);
+    std::vector<float> storage((1 + A) * kTilePixels);
+    float* __restrict behind = storage.data();       // colour of the contributors behind, dotted with dL
+    float* __restrict dL_tile = behind + kTilePixels;  // the image's gradient
+    std::vector<Floats> sums(sum_vectors(A));
+    std::vector<float> totals(sum_vectors(A)), f_active(A);
 // tiles dealt round-robin: balanced, and each thread's sums (hence the gradients) the same on every run
 #pragma omp for schedule(static, 1)
     for (int64_t k = 0; k < tiles; ++k) {
@@ -527,8 +569,10 @@ std::vector<torch::Tensor> composite_backward(torch::Tensor means2d, torch::Tens
         }
       }
       const int start = in.offsets[k];
-      backward_tile(in, r, start, max_last, active, T, n_last, behind, dL_tile, grads, stride, feature_lanes.data(),
-                    f_active.data());
+      // colour alone (3 channels) and colour over a background (its alpha too) get walks compiled for their count
+      const auto walk = A == 3 ? backward_tile<3> : A == 4 ? backward_tile<4> : backward_tile<0>;
+      walk(in, r, start, max_last, active, T, n_last, behind, dL_tile, grads, stride, sums.data(), totals.data(),
+           f_active.data());
     }
 #pragma omp for schedule(static)
     for (int64_t g = 0; g < N; ++g) {
