@@ -32,7 +32,8 @@ DEPTH_RANGE_M = (2.0, 8.0)
 SCALE_MEDIAN_M, SCALE_LOG_STD = 0.02, 0.5
 FPS_COUNT, FPS_SIZES = 15_000, (512, 1024)
 TIME_BUDGET_S = 20.0  # per measurement: repeats stop once this much time is spent (at least 2)
-MAX_REPEATS = 7
+MAX_REPEATS = 15  # the median of up to this many calls (7 before 2026-11-28: single runs spread by 10-20%)
+WARM_UP_CALLS = 3  # untimed first calls (the allocator's heap and OpenMP's threads are set up over the first few)
 TORCH_MAX_PIXELS_X_GAUSSIANS = 256 * 256 * 50_000  # the pure-PyTorch backend is measured up to this size
 
 
@@ -86,7 +87,8 @@ def measure(backend: str, count: int, size: int, backward: bool, device: str = "
 
         extension()  # load (or build once) the C++ kernel before measuring memory
     before = torch.cuda.memory_allocated() if on_gpu else _memory_kb("VmRSS") * 1024
-    call()  # warm-up
+    for _ in range(WARM_UP_CALLS):
+        call()
     times, spent = [], 0.0
     while len(times) < 2 or (spent < TIME_BUDGET_S and len(times) < MAX_REPEATS):
         start = time.perf_counter()

@@ -14,3 +14,9 @@ __version__ = "0.1.0"
 OPENMP_ENVIRONMENT = {"OMP_WAIT_POLICY": "passive", "GOMP_SPINCOUNT": "10000"}
 for _name, _value in OPENMP_ENVIRONMENT.items():
     os.environ.setdefault(_name, _value)
+
+# Large freed blocks stay with the process for the next iteration instead of being faulted in again page by page
+# (glimpse/allocator.py); the environment's own allocator settings win.
+from glimpse.allocator import keep_freed_memory  # noqa: E402  (after the OpenMP settings, which must come first)
+
+keep_freed_memory()

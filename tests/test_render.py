@@ -130,6 +130,37 @@ def test_cpu_projection_backward_with_outputs_the_loss_does_not_read():
 
 
 @needs_cpu_kernel
+@pytest.mark.parametrize("antialiased", [False, True])
+def test_each_gaussian_projects_alike_alone_and_among_others(antialiased):
+    """The covariance and projection kernels compute eight Gaussians at a time, one per vector lane, and fill the
+    lanes of a last, partial group with copies. A Gaussian's outputs and gradients must depend on its own inputs
+    alone: each of a mixed set (behind the camera, off the image, needles, ordinary ones) computed within the set of
+    19 (two whole groups and a partial one) and alone (one lane used) gives the same to the bit."""
+    g = torch.Generator().manual_seed(5)
+    parts = [scene(kind, n=40, seed=2) for kind in ("behind", "border", "degenerate", "random")]
+    pick = torch.randperm(160, generator=g)[:19]
+    params = {k: torch.cat([part[k] for part in parts])[pick] for k in ("means", "quats", "scales", "opacities")}
+    weights = {name: torch.randn(19, width, generator=g).squeeze(1)
+               for name, width in (("means2d", 2), ("conics", 3), ("depths", 1), ("opacities", 1))}
+    cam = Camera(camera().K, torch.linalg.matrix_exp(torch.tensor([[0, -0.1, 0.2], [0.1, 0, -0.05], [-0.2, 0.05, 0]])),
+                 torch.tensor([0.1, -0.2, 0.3]), 64, 48)
+
+    def project(rows: slice) -> list[torch.Tensor]:
+        leaves = {k: v[rows].clone().requires_grad_(True) for k, v in params.items()}
+        p = project_gaussians_cpu(leaves["means"], quat_scale_to_covariance(leaves["quats"], leaves["scales"]),
+                                  leaves["opacities"], cam, antialiased)
+        sum((getattr(p, name) * w[rows]).sum() for name, w in weights.items()).backward()
+        outputs = (p.means2d, p.conics, p.depths, p.opacities, p.extents, p.radii, p.visible)
+        return [t.detach() for t in outputs] + [leaves[k].grad for k in params]
+
+    together = project(slice(None))
+    alone = [torch.cat(parts) for parts in zip(*(project(slice(i, i + 1)) for i in range(19)))]
+    assert together[-4].abs().sum() > 0 and together[6].any() and not together[6].all()  # gradients; some culled
+    for a, b in zip(together, alone):
+        assert torch.equal(a, b)
+
+
+@needs_cpu_kernel
 @pytest.mark.parametrize("active", [1, 3, 4, 11])
 def test_the_backward_matches_the_reference_for_any_number_of_active_channels(active):
     """The kernel's backward has walks compiled for 3 and 4 active channels (colour; colour over a background) and

@@ -36,7 +36,7 @@ CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = [CSRC / name for name in (
     "composite_cpu.cpp", "project_cpu.cpp", "preprocess_cpu.cpp", "pose_cpu.cpp", "skinning_cpu.cpp",
     "ssim_cpu.cpp", "mesh_raster_cpu.cpp")]
-HEADERS = [CSRC / "sh_basis.h", CSRC / "polar.h", CSRC / "raster_rules.h"]
+HEADERS = [CSRC / "sh_basis.h", CSRC / "polar.h", CSRC / "raster_rules.h", CSRC / "lanes.h"]
 # -fno-trapping-math -fno-signed-zeros -ffinite-math-only let GCC turn the per-pixel selects
 # and min/max into vector blends; unlike -ffast-math they never reassociate arithmetic, so
 # finite inputs give IEEE results (the kernel's inputs are finite by construction).

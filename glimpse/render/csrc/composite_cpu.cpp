@@ -24,9 +24,6 @@
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 #include <omp.h>
-#ifdef __AVX__
-#include <immintrin.h>
-#endif
 
 #include <algorithm>
 #include <cmath>
@@ -34,9 +31,12 @@
 #include <cstring>
 #include <vector>
 
+#include "lanes.h"
 #include "raster_rules.h"
 
 namespace {
+
+using namespace glimpse_lanes;  // kLanes: pixels of a row computed together (one AVX2 vector)
 
 using glimpse_raster::kAlphaMin;
 
@@ -44,7 +44,6 @@ constexpr float kAlphaMax = 0.999f;
 constexpr float kTransmittanceMin = 1e-4f;
 constexpr int kTile = 16;  // pixels per tile side (glimpse/render/rasterize.py TILE_SIZE)
 constexpr int kTilePixels = kTile * kTile;
-constexpr int kLanes = 8;  // pixels of a row computed together (one AVX2 vector)
 
 struct Inputs {
   const float* means2d;   // [N, 2]
@@ -153,37 +152,8 @@ inline TileRect tile_rect(const Inputs& in, int64_t k) {
   return {x0, y0, std::min<int64_t>(x0 + kTile, in.width), std::min<int64_t>(y0 + kTile, in.height)};
 }
 
-// kLanes pixels of a row as one vector (GCC's vector extensions: AVX2 where built with it, else pairs of
-// SSE registers): every operation is written for all lanes, and every store writes whole vectors.
-typedef float Floats __attribute__((vector_size(kLanes * sizeof(float))));
-typedef int32_t Ints __attribute__((vector_size(kLanes * sizeof(int32_t))));
-constexpr Floats kLaneOffsets = {0, 1, 2, 3, 4, 5, 6, 7};
-constexpr Ints kLaneIndices = {0, 1, 2, 3, 4, 5, 6, 7};
-static_assert(kLanes == 8, "kLaneOffsets and kLaneIndices list one value per lane");
-
-inline Floats load(const float* p) {
-  Floats v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline Ints load(const int* p) {
-  Ints v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline void store(float* p, Floats v) { std::memcpy(p, &v, sizeof v); }
-inline void store(int* p, Ints v) { std::memcpy(p, &v, sizeof v); }
-inline Floats min(Floats a, Floats b) { return a < b ? a : b; }
-inline Floats max(Floats a, Floats b) { return a > b ? a : b; }
-inline int lane_bits(Ints mask) {  // bit i set where lane i of a comparison's result is set (all bits)
-#ifdef __AVX__
-  return _mm256_movemask_ps(reinterpret_cast<__m256>(mask));  // one instruction instead of 8 extractions
-#else
-  int bits = 0;
-  for (int i = 0; i < kLanes; ++i) bits |= (mask[i] & 1) << i;
-  return bits;
-#endif
-}
+// kLanes pixels of a row as one vector (lanes.h): every operation is written for all lanes, and every store writes
+// whole vectors.
 inline int count_lanes(Ints mask) { return __builtin_popcount(static_cast<unsigned>(lane_bits(mask))); }
 inline bool any_lane(Ints mask) { return lane_bits(mask) != 0; }
 
@@ -245,15 +215,6 @@ inline uint32_t spread_bits(uint32_t x) {  // bit i of a 16-bit x to bit 2i
   x = (x | (x << 4)) & 0x0F0F0F0Fu;
   x = (x | (x << 2)) & 0x33333333u;
   return (x | (x << 1)) & 0x55555555u;
-}
-
-inline Floats sqrt_lanes(Floats v) {
-#ifdef __AVX__
-  return reinterpret_cast<Floats>(_mm256_sqrt_ps(reinterpret_cast<__m256>(v)));
-#else
-  for (int i = 0; i < kLanes; ++i) v[i] = std::sqrt(v[i]);
-  return v;
-#endif
 }
 
 inline uint32_t reach_steps(const TileGaussian& t, int64_t x0, int64_t y0) {

@@ -10,19 +10,34 @@
 #include <cmath>
 #include <vector>
 
+#include "lanes.h"
 #include "sh_basis.h"
 
 namespace {
 
+using namespace glimpse_lanes;
 using namespace glimpse_sh;
 
 constexpr int64_t kGrain = 1024;
 
-// Rotation matrix (row-major) of the unit quaternion (w, x, y, z).
-inline void rotation(float w, float x, float y, float z, float R[9]) {
-  R[0] = 1 - 2 * (y * y + z * z), R[1] = 2 * (x * y - w * z), R[2] = 2 * (x * z + w * y);
-  R[3] = 2 * (x * y + w * z), R[4] = 1 - 2 * (x * x + z * z), R[5] = 2 * (y * z - w * x);
-  R[6] = 2 * (x * z - w * y), R[7] = 2 * (y * z + w * x), R[8] = 1 - 2 * (x * x + y * y);
+// Rotation matrices (row-major) of unit quaternions (w, x, y, z).
+inline void rotation(Floats w, Floats x, Floats y, Floats z, Floats R[9]) {
+  R[0] = 1.0f - 2.0f * (y * y + z * z), R[1] = 2.0f * (x * y - w * z), R[2] = 2.0f * (x * z + w * y);
+  R[3] = 2.0f * (x * y + w * z), R[4] = 1.0f - 2.0f * (x * x + z * z), R[5] = 2.0f * (y * z - w * x);
+  R[6] = 2.0f * (x * z - w * y), R[7] = 2.0f * (y * z + w * x), R[8] = 1.0f - 2.0f * (x * x + y * y);
+}
+
+// Unit quaternions q / max(|q|, floor) of quaternions q [4] (any length), and the lengths divided by.
+inline Floats normalised(const Floats* q, Floats* unit) {
+  const Floats norm = max(sqrt_lanes(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), Floats{} + kNormFloor);
+  for (int k = 0; k < 4; ++k) unit[k] = q[k] / norm;
+  return norm;
+}
+
+// M = R S (R the rotation, S = diag(scales)): the covariance is M Mᵀ.
+inline void rotation_scale(const Floats* R, const Floats* scales, Floats* M) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) M[3 * i + j] = R[3 * i + j] * scales[j];
 }
 
 void check_float(const std::vector<torch::Tensor>& tensors, const char* what) {
@@ -33,7 +48,8 @@ void check_float(const std::vector<torch::Tensor>& tensors, const char* what) {
 
 }  // namespace
 
-// quats [N, 4] (wxyz, any length), scales [N, 3] -> covariances [N, 3, 3] = R S S^T R^T.
+// quats [N, 4] (wxyz, any length), scales [N, 3] -> covariances [N, 3, 3] = R S S^T R^T. Eight Gaussians at a
+// time, one per lane (lanes.h).
 torch::Tensor covariance_forward(torch::Tensor quats, torch::Tensor scales) {
   check_float({quats, scales}, "covariance_forward");
   const int64_t N = quats.size(0);
@@ -41,16 +57,17 @@ torch::Tensor covariance_forward(torch::Tensor quats, torch::Tensor scales) {
   const float *q = quats.data_ptr<float>(), *s = scales.data_ptr<float>();
   float* cov = out.data_ptr<float>();
   at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
-    for (int64_t n = begin; n < end; ++n) {
-      const float* qn = q + 4 * n;
-      const float norm = std::max(std::sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3]), kNormFloor);
-      float R[9], M[9];
-      rotation(qn[0] / norm, qn[1] / norm, qn[2] / norm, qn[3] / norm, R);
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) M[3 * i + j] = R[3 * i + j] * s[3 * n + j];
-      float* c = cov + 9 * n;
+    for (int64_t n = begin; n < end; n += kLanes) {  // Gaussians n .. n + count - 1, one per lane
+      const int count = static_cast<int>(std::min<int64_t>(kLanes, end - n));
+      Floats quat[4], unit[4], scale[3], R[9], M[9], c[9];
+      gather(q, n, count, quat);
+      gather(s, n, count, scale);
+      normalised(quat, unit);
+      rotation(unit[0], unit[1], unit[2], unit[3], R);
+      rotation_scale(R, scale, M);
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) c[3 * i + j] = M[3 * i] * M[3 * j] + M[3 * i + 1] * M[3 * j + 1] + M[3 * i + 2] * M[3 * j + 2];
+      scatter(c, cov, n, count);
     }
   });
   return out;
@@ -65,39 +82,39 @@ std::vector<torch::Tensor> covariance_backward(torch::Tensor quats, torch::Tenso
   const float *q = quats.data_ptr<float>(), *s = scales.data_ptr<float>(), *vc = v_cov.data_ptr<float>();
   float *vq = v_quats.data_ptr<float>(), *vs = v_scales.data_ptr<float>();
   at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
-    for (int64_t n = begin; n < end; ++n) {
-      const float* qn = q + 4 * n;
-      const float norm = std::max(std::sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3]), kNormFloor);
-      const float w = qn[0] / norm, x = qn[1] / norm, y = qn[2] / norm, z = qn[3] / norm;
-      float R[9], M[9], vM[9], vR[9];
+    for (int64_t n = begin; n < end; n += kLanes) {  // Gaussians n .. n + count - 1, one per lane
+      const int count = static_cast<int>(std::min<int64_t>(kLanes, end - n));
+      Floats quat[4], unit[4], scale[3], G[9], R[9], M[9], vM[9], vR[9], v_scale[3];
+      gather(q, n, count, quat);
+      gather(s, n, count, scale);
+      gather(vc, n, count, G);
+      const Floats norm = normalised(quat, unit);
+      const Floats w = unit[0], x = unit[1], y = unit[2], z = unit[3];
       rotation(w, x, y, z, R);
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) M[3 * i + j] = R[3 * i + j] * s[3 * n + j];
-      const float* G = vc + 9 * n;  // cov = M M^T: v_M = (G + G^T) M
-      for (int i = 0; i < 3; ++i)
+      rotation_scale(R, scale, M);
+      for (int i = 0; i < 3; ++i)  // cov = M M^T: v_M = (G + G^T) M
         for (int j = 0; j < 3; ++j) {
-          float sum = 0;
+          Floats sum{};
           for (int k = 0; k < 3; ++k) sum += (G[3 * i + k] + G[3 * k + i]) * M[3 * k + j];
           vM[3 * i + j] = sum;
         }
       for (int j = 0; j < 3; ++j) {
-        vs[3 * n + j] = vM[j] * R[j] + vM[3 + j] * R[3 + j] + vM[6 + j] * R[6 + j];
-        for (int i = 0; i < 3; ++i) vR[3 * i + j] = vM[3 * i + j] * s[3 * n + j];
+        v_scale[j] = vM[j] * R[j] + vM[3 + j] * R[3 + j] + vM[6 + j] * R[6 + j];
+        for (int i = 0; i < 3; ++i) vR[3 * i + j] = vM[3 * i + j] * scale[j];
       }
+      scatter(v_scale, vs, n, count);
       // through the rotation matrix of the unit quaternion
-      const float vw = 2 * (-z * vR[1] + y * vR[2] + z * vR[3] - x * vR[5] - y * vR[6] + x * vR[7]);
-      const float vx = 2 * (y * vR[1] + z * vR[2] + y * vR[3] - 2 * x * vR[4] - w * vR[5] + z * vR[6] + w * vR[7] -
-                            2 * x * vR[8]);
-      const float vy = 2 * (-2 * y * vR[0] + x * vR[1] + w * vR[2] + x * vR[3] + z * vR[5] - w * vR[6] + z * vR[7] -
-                            2 * y * vR[8]);
-      const float vz = 2 * (-2 * z * vR[0] - w * vR[1] + x * vR[2] + w * vR[3] - 2 * z * vR[4] + y * vR[5] +
-                            x * vR[6] + y * vR[7]);
+      const Floats vw = 2.0f * (-z * vR[1] + y * vR[2] + z * vR[3] - x * vR[5] - y * vR[6] + x * vR[7]);
+      const Floats vx = 2.0f * (y * vR[1] + z * vR[2] + y * vR[3] - 2.0f * x * vR[4] - w * vR[5] + z * vR[6] +
+                                w * vR[7] - 2.0f * x * vR[8]);
+      const Floats vy = 2.0f * (-2.0f * y * vR[0] + x * vR[1] + w * vR[2] + x * vR[3] + z * vR[5] - w * vR[6] +
+                                z * vR[7] - 2.0f * y * vR[8]);
+      const Floats vz = 2.0f * (-2.0f * z * vR[0] - w * vR[1] + x * vR[2] + w * vR[3] - 2.0f * z * vR[4] +
+                                y * vR[5] + x * vR[6] + y * vR[7]);
       // and through the normalisation q / |q|
-      const float along = w * vw + x * vx + y * vy + z * vz;
-      vq[4 * n] = (vw - w * along) / norm;
-      vq[4 * n + 1] = (vx - x * along) / norm;
-      vq[4 * n + 2] = (vy - y * along) / norm;
-      vq[4 * n + 3] = (vz - z * along) / norm;
+      const Floats along = w * vw + x * vx + y * vy + z * vz;
+      scatter({(vw - w * along) / norm, (vx - x * along) / norm, (vy - y * along) / norm, (vz - z * along) / norm},
+              vq, n, count);
     }
   });
   return {v_quats, v_scales};
