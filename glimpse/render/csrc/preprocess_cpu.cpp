@@ -140,7 +140,9 @@ std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, tor
   v_rgb = v_rgb.contiguous();
   check_float({coeffs, dirs, v_rgb}, "sh_backward");
   const int64_t N = coeffs.size(0), K = coeffs.size(1), C = coeffs.size(2), used = (degree + 1) * (degree + 1);
-  auto v_coeffs = torch::zeros_like(coeffs), v_dirs = torch::empty_like(dirs);
+  TORCH_CHECK(degree >= 0 && degree <= 3 && K >= used, "sh_backward: bad degree or too few coefficients");
+  // every coefficient is written below (0 beyond the degree): no fill beforehand, one pass over [N, K, C] less
+  auto v_coeffs = torch::empty_like(coeffs), v_dirs = torch::empty_like(dirs);
   const float *sh = coeffs.data_ptr<float>(), *d = dirs.data_ptr<float>(), *g = v_rgb.data_ptr<float>();
   float *vsh = v_coeffs.data_ptr<float>(), *vd = v_dirs.data_ptr<float>();
   at::parallel_for(0, N, kGrain, [&](int64_t begin, int64_t end) {
@@ -151,6 +153,7 @@ std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor coeffs, tor
       const float x = dn[0] / norm, y = dn[1] / norm, z = dn[2] / norm;
       sh_basis(static_cast<int>(degree), x, y, z, b);
       std::fill(v_b, v_b + 16, 0.0f);
+      std::fill(vsh + (n * K + used) * C, vsh + (n + 1) * K * C, 0.0f);
       for (int64_t c = 0; c < C; ++c) {
         float sum = 0;
         for (int64_t k = 0; k < used; ++k) sum += b[k] * sh[(n * K + k) * C + c];
