@@ -6,12 +6,14 @@ kernel once more than a few tens of MB of it is free (its trim threshold follows
 64 MB), so the next iteration takes it back page by page: a page fault and a zeroed page for every 4 KB, thousands
 an iteration, at a few microseconds each. Measured on `bench/raster.py`'s scene (50k Gaussians, 256x256, forward
 and backward, 2 cores): 0-2,700 page faults a call and 28-36 ms, against 0-260 faults and 28-29 ms with the
-settings below (docs/speed.md). The cost is that up to TRIM_THRESHOLD_BYTES of freed memory stays with the
-process instead of going back to the system, and a process's peak grows a little (stage 04 at
-320x240: 1,245 MB against 1,155 MB; docs/reliability.md).
+settings below (docs/speed.md). The cost: freed memory stays with the process instead of going back to the
+system, up to TRIM_THRESHOLD_BYTES at the top of the main heap, and all of a thread's heap (glibc gives those at most
+64 MB each, and trims them only past the same threshold); a process's peak grows a little (stage 04 at 320x240:
+1,245 MB against 1,155 MB; docs/reliability.md).
 
-Settings the user gives glibc themselves (MALLOC_TRIM_THRESHOLD_, MALLOC_MMAP_THRESHOLD_ or GLIBC_TUNABLES in the
-environment) win: nothing is changed then.
+The settings are the whole process's, a program that imports Glimpse included. Any of USER_SETTINGS in the
+environment (glibc's own ways to tune its allocator; any value of GLIBC_TUNABLES) keeps glibc as it is: nothing is
+changed then.
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ print(*counts[1:])
 
 
 def iteration_faults(first_import: str) -> list[int]:
-    env = {k: v for k, v in os.environ.items() if k not in USER_SETTINGS}
+    env = {k: v for k, v in os.environ.items() if k not in (*USER_SETTINGS, "LD_PRELOAD")}  # glibc's own malloc
     out = subprocess.run([sys.executable, "-c", f"import sys; sys.path.insert(0, {str(ROOT)!r}); {first_import}\n"
                           + ITERATIONS], capture_output=True, text=True, check=True, env=env, cwd=ROOT)
     return [int(n) for n in out.stdout.split()]
@@ -52,9 +52,11 @@ def iteration_faults(first_import: str) -> list[int]:
 def test_freed_buffers_are_not_faulted_in_again_once_glimpse_is_imported():
     pages = 3 * 24 * 2**20 // 4096
     plain = iteration_faults("pass")
+    # glibc by default gives the 72 MB back (more than its 48 MB trim threshold) and faults it in again every time, a
+    # page at a time: where it does not (huge pages for every heap, another allocator), there is nothing to show
+    if min(plain) < pages // 2:
+        pytest.skip(f"freed blocks are not faulted in again page by page here ({plain} faults an iteration)")
     kept = iteration_faults("import glimpse")
-    # glibc by default gives the 72 MB back (more than its 48 MB trim threshold) and faults it in again every time
-    assert min(plain) > pages // 2, plain
     assert max(kept) < pages // 20, kept
 
 
