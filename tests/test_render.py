@@ -29,6 +29,12 @@ def camera(width=64, height=48, focal=55.0, dtype=torch.float32) -> Camera:
     return Camera(K, torch.eye(3, dtype=dtype), torch.zeros(3, dtype=dtype), width, height)
 
 
+def turned_camera() -> Camera:
+    """camera()'s intrinsics, turned and moved off the world's axes (every entry of R and t in play)."""
+    R = torch.linalg.matrix_exp(torch.tensor([[0, -0.1, 0.2], [0.1, 0, -0.05], [-0.2, 0.05, 0]]))
+    return Camera(camera().K, R, torch.tensor([0.1, -0.2, 0.3]), 64, 48)
+
+
 def scene(kind: str, n: int = 400, seed: int = 0) -> dict:
     """Random Gaussians in front of the camera, plus the hard cases of `kind`."""
     g = torch.Generator().manual_seed(seed)
@@ -142,8 +148,7 @@ def test_each_gaussian_projects_alike_alone_and_among_others(antialiased):
     params = {k: torch.cat([part[k] for part in parts])[pick] for k in ("means", "quats", "scales", "opacities")}
     weights = {name: torch.randn(19, width, generator=g).squeeze(1)
                for name, width in (("means2d", 2), ("conics", 3), ("depths", 1), ("opacities", 1))}
-    cam = Camera(camera().K, torch.linalg.matrix_exp(torch.tensor([[0, -0.1, 0.2], [0.1, 0, -0.05], [-0.2, 0.05, 0]])),
-                 torch.tensor([0.1, -0.2, 0.3]), 64, 48)
+    cam = turned_camera()
 
     def project(rows: slice) -> list[torch.Tensor]:
         leaves = {k: v[rows].clone().requires_grad_(True) for k, v in params.items()}
@@ -221,8 +226,7 @@ def test_a_loss_on_colour_alone_gets_the_reference_gradients():
 @pytest.mark.parametrize("antialiased", [False, True])
 def test_cpu_projection_matches_the_autograd_projection(kind, antialiased):
     params = scene(kind, n=403)  # not a multiple of the kernel's 8 lanes: each thread's last group is partial
-    cam = Camera(camera().K, torch.linalg.matrix_exp(torch.tensor([[0, -0.1, 0.2], [0.1, 0, -0.05], [-0.2, 0.05, 0]])),
-                 torch.tensor([0.1, -0.2, 0.3]), 64, 48)
+    cam = turned_camera()
     results = []
     for project in (project_gaussians, project_gaussians_cpu):
         means, opacities = params["means"].clone().requires_grad_(True), params["opacities"].clone().requires_grad_(True)

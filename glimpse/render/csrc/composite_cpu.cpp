@@ -293,7 +293,7 @@ inline Floats sum_lanes8(const Floats* v) {
 // The backward's walk of one tile, back to front, from its state (T: final transmittances; behind: zeros; dL_tile:
 // the image's gradient of the active channels), adding each Gaussian's gradients to `grads` [N, stride].
 // sums [sum_vectors(A)] (vectors), totals [sum_vectors(A)] and f_active [A]: scratch for one Gaussian's per-lane
-// sums, their totals and its active features.
+// sums, their totals and its active features (where their count is not compiled in).
 //
 // With the image's gradient dL, a Gaussian's alpha at a pixel gets dL . (f T - B / (1 - alpha)) (gsplat's form; B the
 // colour of the contributors behind it, sum f_j alpha_j T_j): the walk keeps, per pixel, that colour already dotted
@@ -326,9 +326,8 @@ void backward_tile(const Inputs& in, const TileRect& r, int start, int max_last,
     // the lanes of the sums of h, dx h, dx^2 h, dy h, dx dy h, dy^2 h
     Floats s_h{}, s_xh{}, s_xxh{}, s_yh{}, s_xyh{}, s_yyh{};
     std::fill(feature_lanes, feature_lanes + A, Floats{});
-    for (int64_t i = 0; i < A; ++i) f_active[i] = tg.f[active[i]];
-    float f_local[kActive > 0 ? kActive : 1];
-    if constexpr (kActive > 0) std::copy(f_active, f_active + kActive, f_local);
+    float f_local[kActive > 0 ? kActive : 1];  // the active features: with the count known, in registers
+    for (int64_t i = 0; i < A; ++i) (kActive > 0 ? f_local[i] : f_active[i]) = tg.f[active[i]];
     const Ints columns[2] = {(kLaneIndices >= tg.xa) & (kLaneIndices < tg.xb),
                              (kLaneIndices + kLanes >= tg.xa) & (kLaneIndices + kLanes < tg.xb)};
     for (uint32_t steps = now.steps; steps != 0; steps &= steps - 1) {
