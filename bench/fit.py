@@ -9,8 +9,9 @@ Prints one Markdown table per size: mean per-joint error as fitted and after ali
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
 the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings.
 
-People are fitted together (02_smpl_fit.ground: one floor for everyone with a static camera,
-planted feet with a moving one; `--ground off` fits each alone); a second table per size gives, per
+People are fitted together (02_smpl_fit.ground: one floor for everyone, with a static camera or a
+moving one with several people; planted feet for a moving camera's lone person; `--ground off` fits
+each alone); a second table per size gives, per
 scene, the 2D fits' error with no alignment, the error of pelvis-to-pelvis distances, how often the
 depth order of two people agrees with the truth, and fitting seconds per person per 100 frames.
 
@@ -52,7 +53,7 @@ from glimpse.scene import load_scene  # noqa: E402
 
 THREADS = 2
 SEED = 0
-SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "crowd", "adult_child", "crouch")
+SCENARIOS = ("demo", "lower_body_occluded", "moving_camera", "moving_group", "crowd", "adult_child", "crouch")
 TOTAL_DROP = 0.3
 CONDITIONS = ("clean", "noisy", "noisy-30%")
 MODES = ("keypoints3d", "keypoints2d")  # what the bodies are fitted to

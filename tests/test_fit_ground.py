@@ -1,7 +1,8 @@
 """One floor for everyone (glimpse.fit.ground, floor_fit): the floor and placement factors recovered
 from people placed wrong by known factors, contacts, the rescaling that keeps a body's pixels, the
 floor energy's gradient (and its units), the whole step on a scene with an adult and a child, people
-of the prior's size placed at their distance, and planted feet under a moving camera."""
+of the prior's size placed at their distance, planted feet under a moving camera, the parallax of planted feet
+and several people on one floor under a moving camera."""
 
 import numpy as np
 import pytest
@@ -14,7 +15,8 @@ from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, implausible_factors, lowest_points,
-                                person_camera_heights, placement_factors, plane_weights, speed_across_view)
+                                parallax_factor, person_camera_heights, placement_factors, plane_weights,
+                                speed_across_view)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import rescale_about
 from glimpse.fit.objective import FitState, FloorContact, project
@@ -90,6 +92,49 @@ def test_one_line_of_contacts_leaves_the_tilt_about_it_to_the_up_hint():
     assert placement_factors(np.array([np.nan]), np.zeros(1, bool))[1][0] == 1.0
 
 
+def test_the_parallax_of_planted_feet_measures_a_moving_cameras_placement_factor():
+    """A 2D fit placed wrong is its true self scaled about each frame's camera centre: feet that stand still
+    in the world move with the camera in the fit. The factor that makes them stand still again is found from
+    the camera's travel; without travel (a static camera) there is none."""
+    rng = np.random.default_rng(4)
+    frames, true_factor = 30, 0.8  # fitted 1.25 times too far (a child fitted at an adult's size)
+    centres = np.stack([np.linspace(-1.5, 1.5, frames), np.full(frames, 1.5), np.linspace(-2.5, -1.7, frames)], 1)
+    planted = np.array([[0.3, 0.0, 2.0], [0.5, 0.0, 2.1]])  # two sole points that stand still
+    soles = np.repeat(planted[None], frames, 0)
+    soles[:, 1] += np.where(np.arange(frames) < 15, 0.0, 0.4)[:, None] * [1.0, 0.0, 0.0]  # one step half-way
+    contact = np.ones((frames, 2), bool)
+    contact[13:17, 1] = False  # the step's frames: the foot in the air
+    fitted = centres[:, None] + (soles - centres[:, None]) / true_factor
+    ids = np.arange(frames)
+    factor, error = parallax_factor(fitted, contact, centres, ids, max_gap_frames=2)
+    assert factor == pytest.approx(true_factor, rel=1e-9) and error < 1e-6
+    noisy = fitted + rng.normal(0.0, 0.01, fitted.shape)  # 1 cm of jitter
+    factor, error = parallax_factor(noisy, contact, centres, ids, max_gap_frames=2)
+    assert abs(factor - true_factor) < 4 * error * factor and error < 0.05
+    # a foot that slides during one run (a turning step taken for a planted foot) is told by the runs' spread
+    sliding, runs = soles.copy(), contact.copy()
+    sliding[:13, 1] += np.linspace(0.0, 0.3, 13)[:, None] * [1.0, 0.0, 0.0]
+    runs[[10, 20], 0] = False  # five runs of 8-13 frames
+    slid = centres[:, None] + (sliding - centres[:, None]) / true_factor + rng.normal(0.0, 0.01, fitted.shape)
+    factor_slid, error_slid = parallax_factor(slid, runs, centres, ids, max_gap_frames=1)
+    assert abs(factor_slid - true_factor) > 0.03 and error_slid > 3 * error
+    assert abs(factor_slid - true_factor) < 3 * error_slid * factor_slid
+    # a contact run is broken by a gap longer than max_gap_frames; single frames tell nothing
+    sparse = ids * 3
+    assert np.isfinite(parallax_factor(fitted, contact, centres, sparse, max_gap_frames=3)[0])
+    assert np.isnan(parallax_factor(fitted, contact, centres, sparse, max_gap_frames=2)[0])
+    # a static camera has no travel: no factor
+    static = np.repeat(centres[:1], frames, 0)
+    factor, error = parallax_factor(static[:, None] + (soles - static[:, None]) / true_factor, contact, static, ids, 2)
+    assert np.isnan(factor) and np.isinf(error)
+    # people placed by such a cue set the camera's height over the people's mean size
+    heights = np.array([1.5, 1.5 / true_factor, 1.6])
+    measured = np.array([np.nan, 1.5, np.nan])
+    camera_height, factors = placement_factors(heights, np.zeros(3, bool), None, measured, np.ones(3))
+    assert camera_height == pytest.approx(1.5)
+    np.testing.assert_allclose(factors, [1.0, true_factor, 1.5 / 1.6])
+
+
 def test_contacts_are_the_lowest_sole_points_that_stay_put_across_the_view():
     frames, times = 9, np.arange(9) / 10.0
     soles = np.zeros((frames, 2, 3))
@@ -110,18 +155,23 @@ def test_contacts_are_the_lowest_sole_points_that_stay_put_across_the_view():
     assert np.isinf(speed_across_view(soles[:2], times[:2], np.array([0, 10]), np.zeros(3), 2)).all()
 
 
-def test_rescaling_about_the_camera_keeps_the_pixels_and_scales_the_body(model):
+@pytest.mark.parametrize("camera_moves", [False, True])
+def test_rescaling_about_the_camera_keeps_the_pixels_and_scales_the_body(model, camera_moves):
+    """Scaled about each frame's camera centre (a static camera's one centre, or a moving camera's own centre
+    per frame), a body projects to the same pixels in every frame."""
     body = KeypointBody(model, keypoint_map("coco17", model.data))
-    position, target = np.array([0.0, 1.5, -2.5]), np.array([0.0, 1.0, 2.0])
-    R, t = look_at_pose(position, target)
+    target = np.array([0.0, 1.0, 2.0])
+    positions = np.array([[0.0, 1.5, -2.5], [0.8, 1.6, -2.3], [1.6, 1.4, -2.1]]) if camera_moves \
+        else np.repeat([[0.0, 1.5, -2.5]], 3, 0)
+    poses = [look_at_pose(position, target) for position in positions]
     K = torch.as_tensor(intrinsics(320, 240, 60.0))[None].repeat(3, 1, 1)
-    Rt, tt = torch.as_tensor(R)[None].repeat(3, 1, 1), torch.as_tensor(t)[None].repeat(3, 1)
+    Rt, tt = (torch.as_tensor(np.stack(x)) for x in zip(*poses))
     g = torch.Generator().manual_seed(1)
     state = FitState(0.5 * torch.randn(10, generator=g, dtype=F64), 0.2 * torch.randn(3, 3, generator=g, dtype=F64),
                      0.2 * torch.randn(3, 69, generator=g, dtype=F64),
                      torch.tensor([[0.0, 1.0, 2.0], [0.3, 1.0, 2.2], [0.6, 1.0, 2.4]], dtype=F64),
                      torch.zeros((), dtype=F64))
-    centre = torch.as_tensor(position)
+    centre = torch.as_tensor(positions) if camera_moves else torch.as_tensor(positions[0])
     for factor in (0.85, 1.15):
         moved = rescale_about(state, body, centre, factor, ridge=1e-8)
         before = body(state.betas, state.global_orient, state.body_pose, state.transl, torch.ones((), dtype=F64))
@@ -167,7 +217,7 @@ def test_floor_energy_gradient_matches_finite_differences(model):
 
 def _fit_from_2d_keypoints(model, scenario: str, tmp_path, seed: int):
     """Fixture ``scenario`` (small) with its 2D keypoints only, everyone fitted with pipeline.yaml's stage 02:
-    (fits, floor, the ground-truth folder, the static camera's centre)."""
+    (fits, floor, the ground-truth folder, the cameras by frame id)."""
     scene_dir = make_scene(scenario, tmp_path / scenario, "small", seed=seed)
     keep_only_2d_keypoints(scene_dir)
     scene = load_scene(scene_dir)
@@ -175,11 +225,12 @@ def _fit_from_2d_keypoints(model, scenario: str, tmp_path, seed: int):
     raw = load_pipeline_yaml()["02_smpl_fit"]
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     fits, floor = Fitter(scene, BodyModels(model), cameras, config, "metres").fit_people(list(scene.humans.values()))
-    return fits, floor, scene_dir.with_name(scene_dir.name + ".groundtruth"), cameras[0].centre
+    return fits, floor, scene_dir.with_name(scene_dir.name + ".groundtruth"), cameras
 
 
 def _distance_ratio(model, params, true: dict, camera_centre: np.ndarray) -> float:
-    """Median over the fitted frames of the fitted pelvis's distance from the camera over the true one's."""
+    """Median over the fitted frames of the fitted pelvis's distance from the camera over the true one's
+    (camera_centre: [3], or [T, 3] one per fitted frame)."""
     rows = np.searchsorted(true["frame_ids"], params.frame_ids)
     fitted = body_joints(model, params.betas, params.global_orient, params.body_pose, params.transl)[:, 0]
     real = body_joints(model, true["betas"], true["global_orient"][rows], true["body_pose"][rows],
@@ -191,7 +242,8 @@ def _distance_ratio(model, params, true: dict, camera_centre: np.ndarray) -> flo
 def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, tmp_path):
     """Alone, the child is fitted at an adult's size and placed far too far; on one floor the two are
     placed right relative to each other (their common size stays a prior: both end up equally off)."""
-    fits, floor, truth, centre = _fit_from_2d_keypoints(model, "adult_child", tmp_path, seed=3)
+    fits, floor, truth, cameras = _fit_from_2d_keypoints(model, "adult_child", tmp_path, seed=3)
+    centre = cameras[0].centre
     assert floor["applied"], floor
     assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
     ratios = []
@@ -209,7 +261,8 @@ def test_people_of_about_the_priors_size_are_placed_at_their_distance_from_2d_ke
     demo (1.75 and 1.80 m, the prior's mean is 1.76 m; exact keypoints) came out 5% small and 19 and 26 cm too
     near."""
     monkeypatch.setattr(scenes, "KEYPOINT_NOISE_2D_PX_AT_320", 0.0)
-    fits, _, truth, centre = _fit_from_2d_keypoints(model, "demo", tmp_path, seed=0)
+    fits, _, truth, cameras = _fit_from_2d_keypoints(model, "demo", tmp_path, seed=0)
+    centre = cameras[0].centre
     for fit in fits:
         assert _distance_ratio(model, fit.params, dict(np.load(truth / f"{fit.pid}_body.npz")),
                                centre) == pytest.approx(1.0, abs=0.02), fit.pid
@@ -245,3 +298,22 @@ def test_a_moving_cameras_person_is_placed_better_with_its_feet_planted(model, t
         errors[mode] = joint_errors(model, fit.params, truth)["mpjpe_m"]
     assert fit.report["ground"]["contact_sole_points"] > 0
     assert errors["auto"] < 0.75 * errors["off"], errors
+
+
+def test_several_people_under_a_moving_camera_land_on_one_floor(model, tmp_path, monkeypatch):
+    """Under a moving camera each person is moved along every frame's own rays onto one floor. Fitted alone
+    with planted feet, the child of moving_group is placed at an adult's size and 64-99 cm off (docs/fitting.md);
+    on one floor it is placed right relative to the adults, and the parallax of the waving man's planted feet
+    sets everyone's distance."""
+    monkeypatch.setattr(scenes, "KEYPOINT_NOISE_2D_PX_AT_320", 0.0)
+    fits, floor, truth, cameras = _fit_from_2d_keypoints(model, "moving_group", tmp_path, seed=6)
+    assert floor["applied"] and floor["camera_moves"] and not floor.get("planted_feet_only"), floor
+    assert "parallax" in floor["camera_height_from"], floor
+    assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 2.0
+    ratios = []
+    for fit in fits:
+        centres = np.stack([cameras[int(f)].centre for f in fit.params.frame_ids])
+        ratios.append(_distance_ratio(model, fit.params, dict(np.load(truth / f"{fit.pid}_body.npz")), centres))
+        assert "parallax_factor" in fit.report["ground"]
+    assert np.ptp(np.log(ratios)) < 0.06, ratios  # the child and the adults on one floor
+    assert np.abs(np.log(ratios)).max() < 0.05, ratios  # at their distance

@@ -25,14 +25,18 @@ class FitWeights:
 @dataclass(frozen=True)
 class GroundConfig:
     mode: Literal["auto", "off"]
+    moving_camera: Literal["common_floor", "planted_feet"]
     contact_speed_m_s: float
     contact_height_m: float
     normal_prior_m: float
+    moving_normal_prior_m: float
     standing_thigh_deg: float
     floor_sigma_m: float
     skate_sigma_m_s: float
     shape_ridge: float
     max_placement_factor: float
+    parallax_max_error: float
+    parallax_size_error: float
     iterations: int
 
 

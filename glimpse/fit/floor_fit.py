@@ -9,11 +9,13 @@ on one floor (glimpse.fit.ground) and refitted with their feet on it.
    puts its contact plane on the common floor, then refitted with the floor term on
    (glimpse.fit.objective.FloorContact: contacts on the floor, nothing below it, no sliding).
 
-Steps 2 and 3 only for a static camera in a metric frame: moved along its own rays a person still
-projects to the same pixels there. A moving camera's 2D-fitted people (metric or SfM units) are
-refitted with planted feet only: a sole point that touches the ground does not slide, which, seen
-from the camera's path, pins where the person stands (a floor through their own feet measured
-worse than none: docs/fitting.md).
+Steps 2 and 3 only in a metric frame: a person moved in each frame along that frame's rays, about
+that frame's camera centre, and scaled with it, still projects to the same pixels in every frame. A
+moving camera's heights are measured from its mean centre: exact while the camera keeps its height,
+off by the camera's rise times (1 - factor) where it does not. A moving camera with only one
+person (whose own feet alone tilt a floor: docs/fitting.md), or in SfM units, gets planted feet
+only: a sole point that touches the ground does not slide, which, seen from the camera's path,
+pins where the person stands.
 """
 
 from __future__ import annotations
@@ -31,8 +33,8 @@ from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.fit.config import FitConfig, GroundConfig
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, implausible_factors,
-                                lowest_points, near_own_plane, person_camera_heights, placement_factors, plane_weights,
-                                speed_across_view, standing_weights)
+                                lowest_points, near_own_plane, parallax_factor, person_camera_heights,
+                                placement_factors, plane_weights, speed_across_view, standing_weights)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import FitEnergy, FloorContact
@@ -41,6 +43,7 @@ from glimpse.scene import HumanInputs
 HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
 ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
 STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
+PARALLAX_RUN_GAP_FRAMES = 1  # a planted foot's run is consecutive frames: a missing frame may hide a step
 
 
 @dataclass
@@ -64,6 +67,8 @@ class PendingFit:
 class _Feet:
     soles: np.ndarray  # [T, S, 3] world
     up: np.ndarray  # [T, 3] the body's up in the world
+    frame_ids: np.ndarray  # [T] the person's fitted frames
+    centres: np.ndarray  # [T, 3] the camera's centre in each of the person's frames (world)
     standing: np.ndarray  # [T] how upright the frame's body stands (1: thighs along -up), weights the up hint
     contact: np.ndarray  # [T, S] bool
 
@@ -88,16 +93,19 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
     soles_bodies = [soles[id(models[p.person.pid])] for p in pending]
     feet = [_feet(p, body, frame_centres, config, fps) for p, body in zip(pending, soles_bodies)]
     if not static:
-        return _plant_feet(pending, feet, soles_bodies, g)
-    centre = centres[0]
+        planted_why = _why_planted_feet_only(pending, g)
+        if planted_why is not None:
+            return _plant_feet(pending, feet, soles_bodies, g, planted_why)
+    centre = centres[0] if static else centres.mean(0)  # a moving camera's heights are measured from its mean
     up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
     if np.linalg.norm(up_hint) <= 0:
         return {"applied": False, "reason": "nobody stands upright in any frame (no up to start the floor from)"}
     up_hint = up_hint / np.linalg.norm(up_hint)
     grounded = [lowest_points(f.soles, up_hint) for f in feet]
-    normal = floor_normal(grounded, up_hint, g.normal_prior_m)
+    normal_prior_m = g.normal_prior_m if static else g.moving_normal_prior_m
+    normal = floor_normal(grounded, up_hint, normal_prior_m)
     grounded = near_own_plane(grounded, normal, centre, g.contact_height_m)
-    normal = floor_normal(grounded, up_hint, g.normal_prior_m)
+    normal = floor_normal(grounded, up_hint, normal_prior_m)
     heights = person_camera_heights(grounded, normal, centre)
     anchored = np.array([p.mode in ANCHOR_MODES for p in pending])
     if (heights <= 0).any():  # nan (no points) compares False
@@ -105,7 +113,11 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
         return {"applied": False, "reason": f"the people's feet do not agree on a floor: the camera would stand "
                                             f"below the feet of {', '.join(below)} (a fit with its legs wrong?)"}
     trust = plane_weights(grounded, normal, centre, g.floor_sigma_m)
-    camera_height, factors = placement_factors(heights, anchored, trust)
+    parallax = [_parallax(p, f, config) for p, f in zip(pending, feet)] if not static else []
+    measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)]) if parallax else None
+    measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax]) \
+        if parallax else None
+    camera_height, factors = placement_factors(heights, anchored, trust, measured, measured_weights)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
     implausible = [f"{pending[i].person.pid} ({factors[i]:.2f})"
@@ -116,20 +128,44 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
                                             f"beyond 02_smpl_fit.ground.max_placement_factor "
                                             f"({g.max_placement_factor})"}
     floor = Floor(normal, centre, camera_height)
-    for p, f, height, factor, soles_body in zip(pending, feet, heights, factors, soles_bodies):
+    for k, (p, f, height, factor, soles_body) in enumerate(zip(pending, feet, heights, factors, soles_bodies)):
         p.ground = {"contact_sole_points": int(f.contact.sum()), "factor": float(factor),
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
+        if parallax:
+            p.ground["parallax_factor"] = parallax[k][0] if np.isfinite(parallax[k][0]) else None
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor))
             p.seconds += time.perf_counter() - started
-    anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
-            "camera_height": camera_height,
-            "camera_height_from": ("people placed metrically: " + ", ".join(anchors)) if anchors
-            else "the geometric mean over the people (their fitted heights on average), each weighted by how "
-                 "flat its own ground points lie",
+            "camera_height": camera_height, "camera_moves": not static,
+            "camera_height_from": _camera_height_from(pending, anchored, measured),
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
+
+
+def _parallax(pending: PendingFit, feet: _Feet, config: FitConfig) -> tuple[float, float]:
+    """(factor, relative error) of a 2D-fitted person's planted feet under a moving camera
+    (glimpse.fit.ground.parallax_factor); (nan, inf) for other people, for an error above
+    ``ground.parallax_max_error`` and when that is 0."""
+    if pending.mode != "keypoints2d" or config.ground.parallax_max_error <= 0:
+        return float("nan"), float("inf")
+    factor, error = parallax_factor(feet.soles, feet.contact, feet.centres, feet.frame_ids, PARALLAX_RUN_GAP_FRAMES)
+    if not (np.isfinite(factor) and factor > 0 and error <= config.ground.parallax_max_error):
+        return float("nan"), float("inf")
+    return factor, error
+
+
+def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measured: np.ndarray | None) -> str:
+    """What set the camera's height above the common floor, in words (ground.json)."""
+    anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
+    if anchors:
+        return "people placed metrically: " + ", ".join(anchors)
+    cued = [p.person.pid for p, m in zip(pending, measured if measured is not None else []) if np.isfinite(m)]
+    if cued:
+        return ("the parallax of planted feet as the camera moves (each person's factor that makes them stand "
+                "still), over: " + ", ".join(cued))
+    return ("the geometric mean over the people (their fitted heights on average), each weighted by how flat its "
+            "own ground points lie")
 
 
 def _why_not(pending: list[PendingFit], static: bool, g: GroundConfig) -> str | None:
@@ -144,6 +180,17 @@ def _why_not(pending: list[PendingFit], static: bool, g: GroundConfig) -> str | 
     return None
 
 
+def _why_planted_feet_only(pending: list[PendingFit], g: GroundConfig) -> str | None:
+    """Why a moving camera's people get planted feet only instead of the common floor (None: the floor)."""
+    if g.moving_camera == "planted_feet":
+        return "02_smpl_fit.ground.moving_camera is planted_feet"
+    if len(pending) < 2:
+        return "one person: a floor through a lone person's own fitted feet tilts with its depth errors"
+    if any(p.schedule.fit_scale for p in pending if p.mode == "keypoints2d"):
+        return "the frame is not metric (the scale is fitted)"
+    return None
+
+
 def _static(centres: np.ndarray) -> bool:
     """Whether the cameras' centres [N, 3] (world) agree: a static camera."""
     tolerance = STATIC_CAMERA_TOLERANCE * (1.0 + np.linalg.norm(centres[0]))
@@ -151,10 +198,9 @@ def _static(centres: np.ndarray) -> bool:
 
 
 def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list[KeypointBody],
-                g: GroundConfig) -> dict:
-    """A moving camera: nobody can be moved along one frame's rays, and a floor through the 2D-fitted people's
-    own feet measured worse than none (docs/fitting.md); each one is refitted with its feet held still while
-    they touch the ground, which, seen from the camera's path, pins where the person stands."""
+                g: GroundConfig, why: str) -> dict:
+    """A moving camera without the common floor (``why``): each 2D-fitted person is refitted with its feet
+    held still while they touch the ground, which, seen from the camera's path, pins where the person stands."""
     for p, f, soles_body in zip(pending, feet, soles_bodies):
         p.ground = {"contact_sole_points": int(f.contact.sum())}
         if p.mode == "keypoints2d":
@@ -162,8 +208,8 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
             p.ground["refit"] = _refit(p, f, soles_body, g)
             p.seconds += time.perf_counter() - started
     return {"applied": True, "planted_feet_only": True,
-            "why": "the camera moves: each person fitted from 2D keypoints is refitted with its feet still while they "
-                   "touch the ground (no common floor plane, no placement factors)"}
+            "why": f"the camera moves and {why}: each person fitted from 2D keypoints is refitted with its feet still "
+                   f"while they touch the ground (no common floor plane, no placement factors)"}
 
 
 def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.ndarray], config: FitConfig,
@@ -191,20 +237,21 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.n
     g = config.ground
     frame_centres = np.stack([centres[int(f)] for f in frame_ids])
     speed = speed_across_view(soles, times, frame_ids, frame_centres, config.max_interpolated_gap)
-    return _Feet(soles, up, standing, foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
+    return _Feet(soles, up, frame_ids, frame_centres, standing,
+                 foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
 
 def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: GroundConfig, floor: Floor | None = None,
            factor: float = 1.0) -> dict:
-    """Refit ``pending`` moved by ``factor`` about the floor's camera centre onto ``floor``; without a floor,
+    """Refit ``pending`` moved by ``factor`` about each frame's camera centre onto ``floor``; without a floor,
     with planted feet only and not moved."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None
     if floor is not None:
-        centre = torch.as_tensor(floor.camera_centre, dtype=dtype)
-        state = rescale_about(state, energy.body, centre, factor, g.shape_ridge)
-        plane = (torch.as_tensor(floor.normal, dtype=dtype), centre, floor.camera_height)
+        state = rescale_about(state, energy.body, torch.as_tensor(feet.centres, dtype=dtype), factor, g.shape_ridge)
+        plane = (torch.as_tensor(floor.normal, dtype=dtype), torch.as_tensor(floor.camera_centre, dtype=dtype),
+                 floor.camera_height)
     energy.floor = FloorContact(soles_body, torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m,
                                 g.skate_sigma_m_s, plane)
     stage = refit_on_floor(energy, state, pending.schedule, g.iterations, f"person {pending.person.pid}")

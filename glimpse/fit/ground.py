@@ -142,25 +142,37 @@ def plane_weights(points: list[np.ndarray], normal: np.ndarray, camera_centre: n
     return np.array(weights)
 
 
-def placement_factors(heights: np.ndarray, anchored: np.ndarray,
-                      weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+def placement_factors(heights: np.ndarray, anchored: np.ndarray, weights: np.ndarray | None = None,
+                      measured: np.ndarray | None = None, measured_weights: np.ndarray | None = None
+                      ) -> tuple[float, np.ndarray]:
     """(camera height, [P] factors): person i moved to ``factor_i`` times its distance from the camera
     (and scaled by it) stands on one floor with everyone. The camera height is the median of the
-    anchored people's (placed metrically), else the geometric mean of all, weighted by ``weights`` [P]
-    (equal when None); factor 1 for anchored people and for people without ground points (nan heights)."""
+    anchored people's (placed metrically); else the geometric mean of ``measured`` [P] (the camera's height
+    above the floor as a metric cue measured it through person i, nan where none), weighted by
+    ``measured_weights`` [P]; else the geometric mean of all, weighted by ``weights`` [P] (equal when None).
+    Factor 1 for anchored people and for people without ground points (nan heights)."""
     known = np.isfinite(heights) & (heights > 0)
     if not known.any():
         return float("nan"), np.ones(len(heights))
+    cued = np.zeros(len(heights), bool) if measured is None else known & np.isfinite(measured) & (measured > 0)
     if (known & anchored).any():
         camera_height = float(np.median(heights[known & anchored]))
+    elif cued.any():
+        camera_height = _geometric_mean(measured, cued, measured_weights)
     else:
-        w = np.ones(len(heights)) if weights is None else np.asarray(weights, float)
-        w = np.where(known, w, 0.0)
-        if w.sum() <= 0:
-            w = known.astype(float)
-        camera_height = float(np.exp((w * np.log(np.where(known, heights, 1.0))).sum() / w.sum()))
+        camera_height = _geometric_mean(heights, known, weights)
     factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
     return camera_height, factors
+
+
+def _geometric_mean(values: np.ndarray, use: np.ndarray, weights: np.ndarray | None) -> float:
+    """The geometric mean of ``values`` [P] where ``use`` [P], weighted by ``weights`` [P] (equal when None or
+    when none of the used ones has weight)."""
+    w = np.ones(len(values)) if weights is None else np.asarray(weights, float)
+    w = np.where(use, w, 0.0)
+    if w.sum() <= 0:
+        w = use.astype(float)
+    return float(np.exp((w * np.log(np.where(use, values, 1.0))).sum() / w.sum()))
 
 
 def implausible_factors(factors: np.ndarray, max_factor: float) -> list[int]:
@@ -168,3 +180,42 @@ def implausible_factors(factors: np.ndarray, max_factor: float) -> list[int]:
     a person moved to that many times its distance would be that many times its fitted size, which no
     person's size error explains (a fit with its legs wrong does)."""
     return [i for i, factor in enumerate(factors) if not 1.0 / max_factor <= factor <= max_factor]
+
+
+def parallax_factor(soles: np.ndarray, contact: np.ndarray, centres: np.ndarray, frame_ids: np.ndarray,
+                    max_gap_frames: int) -> tuple[float, float]:
+    """(factor, relative standard error) that makes a moving camera's person's planted feet stand still.
+
+    soles [T, S, 3] the fitted sole points (world), contact [T, S] bool, centres [T, 3] each frame's camera
+    centre, frame_ids [T]. A 2D fit placed wrong is, frame by frame, its true self scaled about that frame's
+    camera centre, so a foot that stands still in the world moves with the camera in the fit; moved to
+    ``c_t + s (x_t - c_t)``, it stands still again for one ``s``, chosen by least squares over every run of
+    contact frames (one sole point, consecutive frames at most ``max_gap_frames`` apart). The camera's
+    travel during the runs is what measures it: (nan, inf) without runs of at least two frames or travel.
+
+    The error is the larger of the least squares' own and the spread of the runs' separate factors about
+    theirs (each run weighted as in the least squares): a fit's feet slide differently in every run, which
+    the residuals of one run do not show."""
+    runs = []  # per run: (camera offsets [n, 3], sole offsets [n, 3]), each about the run's mean
+    for point in range(soles.shape[1]):
+        rows = np.nonzero(contact[:, point])[0]
+        if not len(rows):
+            continue
+        breaks = np.nonzero(np.diff(frame_ids[rows]) > max_gap_frames)[0] + 1
+        for run in np.split(rows, breaks):
+            if len(run) >= 2:
+                offset = soles[run, point] - centres[run]
+                runs.append((centres[run] - centres[run].mean(0), offset - offset.mean(0)))
+    information = np.array([float((offset**2).sum()) for _, offset in runs])  # each run's weight
+    if not runs or information.sum() <= 0:
+        return float("nan"), float("inf")
+    cross = np.array([float((camera * offset).sum()) for camera, offset in runs])
+    factor = -cross.sum() / information.sum()
+    squared = sum(float(((camera + factor * offset) ** 2).sum()) for camera, offset in runs)
+    dof = max(3 * sum(len(camera) - 1 for camera, _ in runs) - 1, 1)
+    error = np.sqrt(squared / dof / information.sum())
+    used = information > 0
+    if used.sum() >= 2:  # the runs' own factors -cross / information, spread about the pooled one
+        spread = information[used] * (-cross[used] / information[used] - factor)
+        error = max(error, np.sqrt((spread**2).sum() * used.sum() / (used.sum() - 1)) / information.sum())
+    return float(factor), float(error / abs(factor)) if factor != 0 else float("inf")

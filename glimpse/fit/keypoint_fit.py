@@ -385,10 +385,11 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
 
 
 def rescale_about(state: FitState, body: KeypointBody, centre: Tensor, factor: float, ridge: float) -> FitState:
-    """The state moved to ``factor`` times its distance from ``centre`` [3] (a static camera's centre) and
-    made ``factor`` times as large, so that it projects to the same pixels: new betas whose rest skeleton
-    (relative to the pelvis) best matches ``factor`` times the old one (least squares with ``ridge`` per
-    unit beta^2), the pelvis path scaled about the centre, orientations and pose kept."""
+    """The state moved to ``factor`` times its distance from ``centre`` (a static camera's centre [3], or each
+    frame's camera centre [T, 3]) and made ``factor`` times as large, so that it projects to the same pixels in
+    every frame: new betas whose rest skeleton (relative to the pelvis) best matches ``factor`` times the old one
+    (least squares with ``ridge`` per unit beta^2), the pelvis path scaled about the centre, orientations and pose
+    kept."""
     offsets = body.joint_shapedirs - body.joint_shapedirs[:1]  # [24, 3, S]: the pelvis-relative skeleton per beta
     template = body.joint_template - body.joint_template[:1]
     rest_old = body.rest_joints(state.betas)
