@@ -119,13 +119,19 @@ def test_the_parallax_of_planted_feet_measures_a_moving_cameras_placement_factor
     factor_slid, error_slid = parallax_factor(slid, runs, centres, ids, max_gap_frames=1)
     assert abs(factor_slid - true_factor) > 0.03 and error_slid > 3 * error
     assert abs(factor_slid - true_factor) < 3 * error_slid * factor_slid
+    # jitter as large as the camera's step between frames does not shrink the factor (the camera's move, which
+    # is exact, is the regressor: regressing on the noisy points gave 0.77 here)
+    factors = [parallax_factor(fitted + np.random.default_rng(k).normal(0.0, 0.1, fitted.shape), contact, centres,
+                               ids, max_gap_frames=2)[0] for k in range(20)]
+    assert np.mean(factors) == pytest.approx(true_factor, rel=0.02)
     # a contact run is broken by a gap longer than max_gap_frames; single frames tell nothing
     sparse = ids * 3
     assert np.isfinite(parallax_factor(fitted, contact, centres, sparse, max_gap_frames=3)[0])
     assert np.isnan(parallax_factor(fitted, contact, centres, sparse, max_gap_frames=2)[0])
-    # a static camera has no travel: no factor
+    # a static camera has no travel: no factor, even where the fitted feet jitter
     static = np.repeat(centres[:1], frames, 0)
-    factor, error = parallax_factor(static[:, None] + (soles - static[:, None]) / true_factor, contact, static, ids, 2)
+    jittered = static[:, None] + (soles - static[:, None]) / true_factor + rng.normal(0.0, 0.01, fitted.shape)
+    factor, error = parallax_factor(jittered, contact, static, ids, 2)
     assert np.isnan(factor) and np.isinf(error)
     # people placed by such a cue set the camera's height over the people's mean size
     heights = np.array([1.5, 1.5 / true_factor, 1.6])
@@ -133,6 +139,10 @@ def test_the_parallax_of_planted_feet_measures_a_moving_cameras_placement_factor
     camera_height, factors = placement_factors(heights, np.zeros(3, bool), None, measured, np.ones(3))
     assert camera_height == pytest.approx(1.5)
     np.testing.assert_allclose(factors, [1.0, true_factor, 1.5 / 1.6])
+    # one person's cue far off (a child's turning steps taken for planted feet) does not move the height
+    camera_height, _ = placement_factors(heights, np.zeros(3, bool), None, np.array([1.49, 1.5, 1.9]),
+                                         np.array([1.0, 1.2, 1.1]))
+    assert camera_height == pytest.approx(1.5)
 
 
 def test_contacts_are_the_lowest_sole_points_that_stay_put_across_the_view():
@@ -314,6 +324,6 @@ def test_several_people_under_a_moving_camera_land_on_one_floor(model, tmp_path,
     for fit in fits:
         centres = np.stack([cameras[int(f)].centre for f in fit.params.frame_ids])
         ratios.append(_distance_ratio(model, fit.params, dict(np.load(truth / f"{fit.pid}_body.npz")), centres))
-        assert "parallax_factor" in fit.report["ground"]
+    assert any(fit.report["ground"]["parallax_factor"] is not None for fit in fits)
     assert np.ptp(np.log(ratios)) < 0.06, ratios  # the child and the adults on one floor
     assert np.abs(np.log(ratios)).max() < 0.05, ratios  # at their distance

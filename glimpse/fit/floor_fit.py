@@ -31,6 +31,7 @@ from glimpse.body.keypoints import landmark_map
 from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
+from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig, GroundConfig
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, implausible_factors,
                                 lowest_points, near_own_plane, parallax_factor, person_camera_heights,
@@ -43,7 +44,7 @@ from glimpse.scene import HumanInputs
 HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
 ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
 STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
-PARALLAX_RUN_GAP_FRAMES = 1  # a planted foot's run is consecutive frames: a missing frame may hide a step
+PARALLAX_RUN_GAP_FRAMES = 1  # a planted foot's run is consecutive scene frames: a missing one may hide a step
 
 
 @dataclass
@@ -113,7 +114,8 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
         return {"applied": False, "reason": f"the people's feet do not agree on a floor: the camera would stand "
                                             f"below the feet of {', '.join(below)} (a fit with its legs wrong?)"}
     trust = plane_weights(grounded, normal, centre, g.floor_sigma_m)
-    parallax = [_parallax(p, f, config) for p, f in zip(pending, feet)] if not static else []
+    rank = {f: k for k, f in enumerate(sorted(cameras))}  # a frame's place among the scene's frames
+    parallax = [_parallax(p, f, rank, config) for p, f in zip(pending, feet)] if not static else []
     measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)]) if parallax else None
     measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax]) \
         if parallax else None
@@ -143,13 +145,18 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
 
 
-def _parallax(pending: PendingFit, feet: _Feet, config: FitConfig) -> tuple[float, float]:
+def _parallax(pending: PendingFit, feet: _Feet, rank: dict[int, int], config: FitConfig) -> tuple[float, float]:
     """(factor, relative error) of a 2D-fitted person's planted feet under a moving camera
-    (glimpse.fit.ground.parallax_factor); (nan, inf) for other people, for an error above
+    (glimpse.fit.ground.parallax_factor); ``rank`` gives each frame id its place among the scene's frames (a
+    video subsampled at ingest keeps its own frame numbers). (nan, inf) for other people, for an error above
     ``ground.parallax_max_error`` and when that is 0."""
     if pending.mode != "keypoints2d" or config.ground.parallax_max_error <= 0:
         return float("nan"), float("inf")
-    factor, error = parallax_factor(feet.soles, feet.contact, feet.centres, feet.frame_ids, PARALLAX_RUN_GAP_FRAMES)
+    if not config.ground.parallax_size_error > 0:
+        raise GlimpseError(f"02_smpl_fit.ground.parallax_size_error must be above 0 (relative), found "
+                           f"{config.ground.parallax_size_error}")
+    frames = np.array([rank[int(f)] for f in feet.frame_ids])
+    factor, error = parallax_factor(feet.soles, feet.contact, feet.centres, frames, PARALLAX_RUN_GAP_FRAMES)
     if not (np.isfinite(factor) and factor > 0 and error <= config.ground.parallax_max_error):
         return float("nan"), float("inf")
     return factor, error

@@ -147,9 +147,10 @@ def placement_factors(heights: np.ndarray, anchored: np.ndarray, weights: np.nda
                       ) -> tuple[float, np.ndarray]:
     """(camera height, [P] factors): person i moved to ``factor_i`` times its distance from the camera
     (and scaled by it) stands on one floor with everyone. The camera height is the median of the
-    anchored people's (placed metrically); else the geometric mean of ``measured`` [P] (the camera's height
-    above the floor as a metric cue measured it through person i, nan where none), weighted by
-    ``measured_weights`` [P]; else the geometric mean of all, weighted by ``weights`` [P] (equal when None).
+    anchored people's (placed metrically); else the weighted median of ``measured`` [P] (the camera's height
+    above the floor as a metric cue measured it through person i, nan where none; weights ``measured_weights``
+    [P]: one person whose cue is off, a child's turning steps taken for planted feet, does not move it); else
+    the geometric mean of all, weighted by ``weights`` [P] (equal when None).
     Factor 1 for anchored people and for people without ground points (nan heights)."""
     known = np.isfinite(heights) & (heights > 0)
     if not known.any():
@@ -158,7 +159,8 @@ def placement_factors(heights: np.ndarray, anchored: np.ndarray, weights: np.nda
     if (known & anchored).any():
         camera_height = float(np.median(heights[known & anchored]))
     elif cued.any():
-        camera_height = _geometric_mean(measured, cued, measured_weights)
+        camera_height = _weighted_median(measured[cued], np.ones(cued.sum()) if measured_weights is None
+                                         else np.asarray(measured_weights, float)[cued])
     else:
         camera_height = _geometric_mean(heights, known, weights)
     factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
@@ -175,6 +177,13 @@ def _geometric_mean(values: np.ndarray, use: np.ndarray, weights: np.ndarray | N
     return float(np.exp((w * np.log(np.where(use, values, 1.0))).sum() / w.sum()))
 
 
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    """The value [N] at which the cumulative weight [N] of the sorted values first reaches half the total."""
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+
+
 def implausible_factors(factors: np.ndarray, max_factor: float) -> list[int]:
     """Indices of the placement ``factors`` [P] beyond ``max_factor`` either way (above it or below its inverse):
     a person moved to that many times its distance would be that many times its fitted size, which no
@@ -187,16 +196,19 @@ def parallax_factor(soles: np.ndarray, contact: np.ndarray, centres: np.ndarray,
     """(factor, relative standard error) that makes a moving camera's person's planted feet stand still.
 
     soles [T, S, 3] the fitted sole points (world), contact [T, S] bool, centres [T, 3] each frame's camera
-    centre, frame_ids [T]. A 2D fit placed wrong is, frame by frame, its true self scaled about that frame's
-    camera centre, so a foot that stands still in the world moves with the camera in the fit; moved to
-    ``c_t + s (x_t - c_t)``, it stands still again for one ``s``, chosen by least squares over every run of
-    contact frames (one sole point, consecutive frames at most ``max_gap_frames`` apart). The camera's
-    travel during the runs is what measures it: (nan, inf) without runs of at least two frames or travel.
+    centre, frame_ids [T] (consecutive frames one apart). A 2D fit placed wrong is, frame by frame, its true
+    self scaled about that frame's camera centre: a foot that stands still at x is fitted at
+    ``c_t + (x - c_t) / s``, so within a run of contact frames (one sole point, frames at most
+    ``max_gap_frames`` apart) its offset from the camera moves by ``-1 / s`` times the camera's own move.
+    That slope is fitted by least squares with the camera's move as the regressor (exact, where the fitted
+    points are noisy: the other way round the noise would shrink the factor); the camera's travel during
+    the runs is what measures it: (nan, inf) without runs of at least two frames, or when the camera does
+    not move during them.
 
-    The error is the larger of the least squares' own and the spread of the runs' separate factors about
-    theirs (each run weighted as in the least squares): a fit's feet slide differently in every run, which
-    the residuals of one run do not show."""
-    runs = []  # per run: (camera offsets [n, 3], sole offsets [n, 3]), each about the run's mean
+    The error is the larger of the least squares' own and the spread of the runs' separate slopes about
+    theirs (each run weighted by its camera travel): a fit's feet slide differently in every run, which the
+    residuals of one run do not show."""
+    runs = []  # per run: (camera offsets [n, 3], sole offsets from the camera [n, 3]), each about the run's mean
     for point in range(soles.shape[1]):
         rows = np.nonzero(contact[:, point])[0]
         if not len(rows):
@@ -206,16 +218,18 @@ def parallax_factor(soles: np.ndarray, contact: np.ndarray, centres: np.ndarray,
             if len(run) >= 2:
                 offset = soles[run, point] - centres[run]
                 runs.append((centres[run] - centres[run].mean(0), offset - offset.mean(0)))
-    information = np.array([float((offset**2).sum()) for _, offset in runs])  # each run's weight
-    if not runs or information.sum() <= 0:
+    travel = np.array([float((camera**2).sum()) for camera, _ in runs])  # each run's weight
+    if not runs or travel.sum() <= 0:
         return float("nan"), float("inf")
     cross = np.array([float((camera * offset).sum()) for camera, offset in runs])
-    factor = -cross.sum() / information.sum()
-    squared = sum(float(((camera + factor * offset) ** 2).sum()) for camera, offset in runs)
+    slope = cross.sum() / travel.sum()  # -1 / factor
+    if slope >= 0:
+        return float("nan"), float("inf")
+    squared = sum(float(((offset - slope * camera) ** 2).sum()) for camera, offset in runs)
     dof = max(3 * sum(len(camera) - 1 for camera, _ in runs) - 1, 1)
-    error = np.sqrt(squared / dof / information.sum())
-    used = information > 0
-    if used.sum() >= 2:  # the runs' own factors -cross / information, spread about the pooled one
-        spread = information[used] * (-cross[used] / information[used] - factor)
-        error = max(error, np.sqrt((spread**2).sum() * used.sum() / (used.sum() - 1)) / information.sum())
-    return float(factor), float(error / abs(factor)) if factor != 0 else float("inf")
+    error = np.sqrt(squared / dof / travel.sum())
+    moved = travel > 0
+    if moved.sum() >= 2:  # the runs' own slopes, spread about the pooled one
+        spread = travel[moved] * (cross[moved] / travel[moved] - slope)
+        error = max(error, np.sqrt((spread**2).sum() * moved.sum() / (moved.sum() - 1)) / travel.sum())
+    return float(-1.0 / slope), float(error / -slope)  # the factor's relative error is the slope's
