@@ -114,11 +114,15 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
         return {"applied": False, "reason": f"the people's feet do not agree on a floor: the camera would stand "
                                             f"below the feet of {', '.join(below)} (a fit with its legs wrong?)"}
     trust = plane_weights(grounded, normal, centre, g.floor_sigma_m)
-    rank = {f: k for k, f in enumerate(sorted(cameras))}  # a frame's place among the scene's frames
-    parallax = [_parallax(p, f, rank, config) for p, f in zip(pending, feet)] if not static else []
-    measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)]) if parallax else None
-    measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax]) \
-        if parallax else None
+    parallax, measured, measured_weights = [], None, None  # (factor, relative error) per person, moving camera
+    if not static:
+        if g.parallax_max_error > 0 and not g.parallax_size_error > 0:  # the error only weighs factors in use
+            raise GlimpseError(f"02_smpl_fit.ground.parallax_size_error must be above 0 (relative), found "
+                               f"{g.parallax_size_error}")
+        rank = {f: k for k, f in enumerate(sorted(cameras))}  # a frame's place among the scene's frames
+        parallax = [_parallax(p, f, rank, config) for p, f in zip(pending, feet)]
+        measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)])
+        measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax])
     camera_height, factors = placement_factors(heights, anchored, trust, measured, measured_weights)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
@@ -152,9 +156,6 @@ def _parallax(pending: PendingFit, feet: _Feet, rank: dict[int, int], config: Fi
     ``ground.parallax_max_error`` and when that is 0."""
     if pending.mode != "keypoints2d" or config.ground.parallax_max_error <= 0:
         return float("nan"), float("inf")
-    if not config.ground.parallax_size_error > 0:
-        raise GlimpseError(f"02_smpl_fit.ground.parallax_size_error must be above 0 (relative), found "
-                           f"{config.ground.parallax_size_error}")
     frames = np.array([rank[int(f)] for f in feet.frame_ids])
     factor, error = parallax_factor(feet.soles, feet.contact, feet.centres, frames, PARALLAX_RUN_GAP_FRAMES)
     if not (np.isfinite(factor) and factor > 0 and error <= config.ground.parallax_max_error):

@@ -162,23 +162,17 @@ def placement_factors(heights: np.ndarray, anchored: np.ndarray, weights: np.nda
         camera_height = _weighted_median(measured[cued], np.ones(cued.sum()) if measured_weights is None
                                          else np.asarray(measured_weights, float)[cued])
     else:
-        camera_height = _geometric_mean(heights, known, weights)
+        w = np.ones(len(heights)) if weights is None else np.asarray(weights, float)
+        w = np.where(known, w, 0.0)
+        if w.sum() <= 0:
+            w = known.astype(float)
+        camera_height = float(np.exp((w * np.log(np.where(known, heights, 1.0))).sum() / w.sum()))
     factors = np.where(known & ~anchored, camera_height / np.where(known, heights, 1.0), 1.0)
     return camera_height, factors
 
 
-def _geometric_mean(values: np.ndarray, use: np.ndarray, weights: np.ndarray | None) -> float:
-    """The geometric mean of ``values`` [P] where ``use`` [P], weighted by ``weights`` [P] (equal when None or
-    when none of the used ones has weight)."""
-    w = np.ones(len(values)) if weights is None else np.asarray(weights, float)
-    w = np.where(use, w, 0.0)
-    if w.sum() <= 0:
-        w = use.astype(float)
-    return float(np.exp((w * np.log(np.where(use, values, 1.0))).sum() / w.sum()))
-
-
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    """The value [N] at which the cumulative weight [N] of the sorted values first reaches half the total."""
+    """The first of the sorted ``values`` [N] at which the cumulative ``weights`` [N] reach half their total."""
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])
     return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
