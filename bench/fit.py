@@ -7,7 +7,8 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
   noisy-30%: the same with further keypoints dropped at random, 30% dropped in all
 Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
-the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings.
+the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings;
+`--state p0` gives stage 02 that person's true height, as a user who knows it would state it.
 
 People are fitted together (02_smpl_fit.ground: one floor for everyone, with a static camera or a
 moving one with several people; planted feet for a moving camera's lone person; `--ground off` fits
@@ -30,6 +31,7 @@ import shutil
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -98,16 +100,27 @@ def _fit_section(ground_mode: str, params: str = "") -> dict:
     return {**raw, "ground": {**raw["ground"], "mode": ground_mode}}
 
 
+def stated_truth(model: BodyModel, scene_dir: Path, state: str, config: FitConfig) -> FitConfig:
+    """``config`` with what a user who knows it would state, taken from the fixture's truth: ``state`` a pid,
+    that person's standing height to the cm (02_smpl_fit.ground.person_heights_m), or ``none``."""
+    if state == "none":
+        return config
+    truth = np.load(scene_dir.with_name(scene_dir.name + ".groundtruth") / f"{state}_body.npz")
+    height = float(model.stature(truth["betas"])) * float(truth["scale"] if "scale" in truth else 1.0)
+    return replace(config, ground=replace(config.ground, person_heights_m=[f"{state}={height:.2f}"]))
+
+
 def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
              conditions: tuple[str, ...] = CONDITIONS, ground_mode: str = "auto", seed: int = SEED,
-             params: str = "", modes: tuple[str, ...] = MODES) -> list[dict]:
+             params: str = "", modes: tuple[str, ...] = MODES, state: str = "none") -> list[dict]:
     raw = _fit_section(ground_mode, params)
-    config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
+    base = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
     rows = []
     for scenario in scenarios:
         original = make_scene(scenario, root / f"{scenario}_{size}", size, seed=seed)
         truth = original.with_name(original.name + ".groundtruth")
+        config = stated_truth(model, original, state, base)
         for condition in conditions:
             scene_dir = root / f"{scenario}_{size}_{condition}"
             shutil.rmtree(scene_dir, ignore_errors=True)
@@ -259,6 +272,9 @@ def main() -> int:
                         help="the fixture scenes' seed (the defaults were tuned on 0)")
     parser.add_argument("--params", default="",
                         help="parameter overrides, as make's PARAMS: 02_smpl_fit.weights.robust_scale_3d_m=0.1")
+    parser.add_argument("--state", default="none",
+                        help="a pid whose true height (to the cm) stage 02 is told, as a user who knows it would "
+                             "state it (02_smpl_fit.ground.person_heights_m); none: nobody's")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
     cache = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "bench_fit"
@@ -266,7 +282,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         for size in ("full",) if args.only_full else ("small", "full") if args.full else ("small",):
             rows = evaluate(size, Path(tmp), tuple(args.scenarios), tuple(args.conditions), args.ground, args.seed,
-                            args.params, tuple(args.modes))
+                            args.params, tuple(args.modes), args.state)
             print_table(size, rows, tuple(args.conditions), tuple(args.modes))
             print_placement_table(size, rows, tuple(args.conditions))
             if not args.no_unseen:

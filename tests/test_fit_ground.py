@@ -1,8 +1,8 @@
 """One floor for everyone (glimpse.fit.ground, floor_fit): the floor and placement factors recovered
 from people placed wrong by known factors, contacts, the rescaling that keeps a body's pixels, the
 floor energy's gradient (and its units), the whole step on a scene with an adult and a child, people
-of the prior's size placed at their distance, planted feet under a moving camera, the parallax of planted feet
-and several people on one floor under a moving camera."""
+of the prior's size placed at their distance, planted feet under a moving camera, the parallax of planted feet,
+several people on one floor under a moving camera, and heights the user states."""
 
 import numpy as np
 import pytest
@@ -12,7 +12,8 @@ from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.body.models import BodyModels
 from glimpse.config import config_from_mapping, load_pipeline_yaml
-from glimpse.fit.config import FitConfig
+from glimpse.errors import ConfigError, GlimpseError
+from glimpse.fit.config import FitConfig, stated_person_heights
 from glimpse.fit.evaluate import body_joints, joint_errors
 from glimpse.fit.ground import (Floor, floor_normal, foot_contacts, implausible_factors, lowest_points,
                                 parallax_factor, person_camera_heights, placement_factors, plane_weights,
@@ -80,6 +81,46 @@ def test_a_floor_that_would_move_someone_beyond_any_size_error_is_named():
     factors = np.array([0.65, 1.0, 2.47, 0.5, 1.8])
     assert implausible_factors(factors, 1.8) == [2, 3]
     assert implausible_factors(factors, 2.5) == []
+
+
+def test_a_stated_height_is_read_and_the_fitted_one_measured(model):
+    """A person of stated height is scaled to it from its fitted standing height: the rest pose's extent along
+    up, as a forward pass with zero pose measures it. Malformed entries are refused."""
+    betas = torch.linspace(-1.0, 1.0, model.num_betas, dtype=F64)
+    rest = model(betas, torch.zeros(1, 3, dtype=F64), torch.zeros(1, 69, dtype=F64), scale=1.3).vertices[0, :, 1]
+    assert float(model.stature(betas)) * 1.3 == pytest.approx(float(rest.max() - rest.min()), rel=1e-12)
+    assert float(model.stature(torch.zeros(model.num_betas, dtype=F64))) == pytest.approx(1.76, abs=0.01)
+    ground = load_pipeline_yaml()["02_smpl_fit"]["ground"]
+    parsed = config_from_mapping(FitConfig, {**load_pipeline_yaml()["02_smpl_fit"],
+                                             "ground": {**ground, "person_heights_m": ["p0=1.88", " p1 = 1.39"]}},
+                                 "x").ground
+    assert stated_person_heights(parsed) == {"p0": 1.88, "p1": 1.39}
+    for entries, message in ((["p0"], "not PID=METRES"), (["p0=188"], "from 0.5 to 2.5"),
+                             (["p0=1.8", "p0=1.7"], "given twice")):
+        bad = config_from_mapping(FitConfig, {**load_pipeline_yaml()["02_smpl_fit"], "ground": {
+            **ground, "person_heights_m": entries}}, "x").ground
+        with pytest.raises(ConfigError, match=message):
+            stated_person_heights(bad)
+
+
+def test_a_stated_height_is_checked_before_any_fit_and_reported_when_not_used(model, tmp_path, monkeypatch):
+    scene_dir = make_scene("adult_child", tmp_path / "adult_child", "tiny", seed=0)
+    keep_only_2d_keypoints(scene_dir)
+    scene = load_scene(scene_dir)
+    _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {
+        **raw["ground"], "person_heights_m": ["p0=1.8", "p7=1.7"]}}, "x")
+    fitter = Fitter(scene, BodyModels(model), cameras, config, "metres")
+    monkeypatch.setattr(fitter, "start", lambda person: pytest.fail("fitted before the stated heights were checked"))
+    with pytest.raises(GlimpseError, match=r"person_heights_m names p7, not in the scene \(its people: p0, p1\)"):
+        fitter.fit_people(list(scene.humans.values()))
+    monkeypatch.undo()
+    # without a common floor (here: switched off) a stated height is not used, and the floor's report says so
+    config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {
+        **raw["ground"], "mode": "off", "person_heights_m": ["p0=1.8"]}}, "x")
+    _, floor = Fitter(scene, BodyModels(model), cameras, config, "metres").fit_people(list(scene.humans.values()))
+    assert not floor["applied"] and "person_heights_m" in floor["stated_not_used"], floor
 
 
 def test_one_line_of_contacts_leaves_the_tilt_about_it_to_the_up_hint():
@@ -165,6 +206,34 @@ def test_contacts_are_the_lowest_sole_points_that_stay_put_across_the_view():
     assert np.isinf(speed_across_view(soles[:2], times[:2], np.array([0, 10]), np.zeros(3), 2)).all()
 
 
+def test_speed_over_a_span_of_time_reads_a_fast_videos_jitter_as_less_speed():
+    fps, frames = 30.0, 12
+    times = np.arange(frames) / fps
+    path = np.zeros((frames, 1, 3))
+    path[:, 0, 0] = times**3  # a central difference over +-h gives 3 t^2 + h^2: h tells which frames were used
+    path[:, 0, 2] = 1e6  # far away: the view's rays are all along z, so x is all across the view
+    speed = speed_across_view(path, times, np.arange(frames), np.zeros(3), max_gap_frames=2, span_s=0.1)
+    h = 3 / fps  # the nearest frames at least 0.1 s away are 3 frames away
+    np.testing.assert_allclose(speed[3:-3, 0], 3 * times[3:-3] ** 2 + h**2, rtol=1e-6)
+    # near the ends, the farthest frame there is on the short side
+    np.testing.assert_allclose(speed[1, 0], (times[4] ** 3 - times[0] ** 3) / (times[4] - times[0]), rtol=1e-6)
+    # span 0 is the adjacent frames, and frames farther apart than max_gap_frames are not bridged
+    adjacent = speed_across_view(path, times, np.arange(frames), np.zeros(3), max_gap_frames=2)
+    np.testing.assert_allclose(adjacent[1:-1, 0], 3 * times[1:-1] ** 2 + (1 / fps) ** 2, rtol=1e-6)
+    split = np.r_[np.arange(6), np.arange(6) + 20]
+    gapped = speed_across_view(path, times, split, np.zeros(3), max_gap_frames=2, span_s=0.1)
+    np.testing.assert_allclose(gapped[5, 0], (times[5] ** 3 - times[2] ** 3) / (times[5] - times[2]), rtol=1e-6)
+    # a planted foot fitted with 1.5 cm of jitter at 33 fps: adjacent frames read it as moving, a 0.1 s span not
+    fps, frames = 33.0, 200
+    times = np.arange(frames) / fps
+    planted = np.zeros((frames, 1, 3))
+    planted[:, 0, 2] = 4.0
+    planted[:, 0, :2] += np.random.default_rng(0).normal(0.0, 0.015, (frames, 2))
+    adjacent = speed_across_view(planted, times, np.arange(frames), np.zeros(3), 2)
+    spanned = speed_across_view(planted, times, np.arange(frames), np.zeros(3), 2, span_s=0.1)
+    assert np.median(adjacent) > 0.3 > np.median(spanned)
+
+
 @pytest.mark.parametrize("camera_moves", [False, True])
 def test_rescaling_about_the_camera_keeps_the_pixels_and_scales_the_body(model, camera_moves):
     """Scaled about each frame's camera centre (a static camera's one centre, or a moving camera's own centre
@@ -225,14 +294,16 @@ def test_floor_energy_gradient_matches_finite_differences(model):
         float(term.energy(points.detach(), times, ids, 2, one)), rel=1e-9)
 
 
-def _fit_from_2d_keypoints(model, scenario: str, tmp_path, seed: int):
-    """Fixture ``scenario`` (small) with its 2D keypoints only, everyone fitted with pipeline.yaml's stage 02:
-    (fits, floor, the ground-truth folder, the cameras by frame id)."""
+def _fit_from_2d_keypoints(model, scenario: str, tmp_path, seed: int, ground: dict | None = None):
+    """Fixture ``scenario`` (small) with its 2D keypoints only, everyone fitted with pipeline.yaml's stage 02
+    (``ground`` overrides entries of its ground section): (fits, floor, the ground-truth folder, the cameras by
+    frame id)."""
     scene_dir = make_scene(scenario, tmp_path / scenario, "small", seed=seed)
     keep_only_2d_keypoints(scene_dir)
     scene = load_scene(scene_dir)
     _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
     raw = load_pipeline_yaml()["02_smpl_fit"]
+    raw = {**raw, "ground": {**raw["ground"], **(ground or {})}}
     config = config_from_mapping(FitConfig, {**raw, "overlay": False}, "pipeline.yaml 02_smpl_fit")
     fits, floor = Fitter(scene, BodyModels(model), cameras, config, "metres").fit_people(list(scene.humans.values()))
     return fits, floor, scene_dir.with_name(scene_dir.name + ".groundtruth"), cameras
@@ -249,10 +320,17 @@ def _distance_ratio(model, params, true: dict, camera_centre: np.ndarray) -> flo
                                                                                            axis=1)))
 
 
-def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, tmp_path):
+@pytest.mark.parametrize("adults_height", ["unknown", "stated"])
+def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, tmp_path, adults_height):
     """Alone, the child is fitted at an adult's size and placed far too far; on one floor the two are
-    placed right relative to each other (their common size stays a prior: both end up equally off)."""
-    fits, floor, truth, cameras = _fit_from_2d_keypoints(model, "adult_child", tmp_path, seed=3)
+    placed right relative to each other (their common size stays a prior: both end up equally off). With the
+    adult's height stated (as a user who knows it would, to the centimetre), both are placed at their distance."""
+    ground = {}
+    if adults_height == "stated":
+        adult = dict(np.load(make_scene("adult_child", tmp_path / "truth", "tiny", seed=3).with_name(
+            "truth.groundtruth") / "p0_body.npz"))
+        ground = {"person_heights_m": [f"p0={float(model.stature(adult['betas'])):.2f}"]}
+    fits, floor, truth, cameras = _fit_from_2d_keypoints(model, "adult_child", tmp_path, seed=3, ground=ground)
     centre = cameras[0].centre
     assert floor["applied"], floor
     assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ [0.0, 1.0, 0.0], -1, 1))) < 3.0
@@ -262,6 +340,9 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
         ratios.append(_distance_ratio(model, fit.params, dict(np.load(truth / f"{fit.pid}_body.npz")), centre))
     # placed right relative to each other (alone, the child is placed about 30% too far: docs/fitting.md)
     assert abs(np.log(ratios[0] / ratios[1])) < 0.05
+    if adults_height == "stated":
+        assert "person_heights_m: p0" in floor["camera_height_from"], floor
+        assert np.abs(np.log(ratios)).max() < 0.03, ratios  # at their distance (the prior's size: 6-7% off)
 
 
 def test_people_of_about_the_priors_size_are_placed_at_their_distance_from_2d_keypoints(model, tmp_path,
@@ -281,7 +362,8 @@ def test_people_of_about_the_priors_size_are_placed_at_their_distance_from_2d_ke
 def test_a_moving_cameras_person_is_placed_better_with_its_feet_planted(model, tmp_path):
     """A moving camera's person, fitted from exact 2D keypoints, cannot be moved along one frame's rays (a
     common floor does not apply); but its feet held still while they touch the ground, seen from the camera's
-    path, pin where it stands (here 14.0 -> 8.6 cm as fitted; docs/fitting.md)."""
+    path, pin where it stands (here 14.0 -> 8.6 cm as fitted; docs/fitting.md). With its height stated it is
+    placed at its size too."""
     scene_dir = make_scene("moving_camera", tmp_path / "moving_camera", "small", seed=2)
     truth = dict(np.load(scene_dir.with_name(scene_dir.name + ".groundtruth") / "p0_body.npz"))
     keep_only_2d_keypoints(scene_dir)
@@ -299,15 +381,19 @@ def test_a_moving_cameras_person_is_placed_better_with_its_feet_planted(model, t
     scene = load_scene(scene_dir)
     raw = load_pipeline_yaml()["02_smpl_fit"]
     errors = {}
-    for mode in ("off", "auto"):
-        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {**raw["ground"], "mode": mode}},
+    stated = {"person_heights_m": [f"p0={float(model.stature(truth['betas'])):.2f}"]}
+    for run, ground in (("off", {"mode": "off"}), ("auto", {}), ("stated", stated)):
+        config = config_from_mapping(FitConfig, {**raw, "overlay": False, "ground": {**raw["ground"], **ground}},
                                      "pipeline.yaml 02_smpl_fit")
         fitter = Fitter(scene, BodyModels(model), cameras, config, "metres")
         (fit,), floor = fitter.fit_people(list(scene.humans.values()))
-        assert floor["applied"] == floor.get("planted_feet_only", False) == (mode == "auto"), floor
-        errors[mode] = joint_errors(model, fit.params, truth)["mpjpe_m"]
-    assert fit.report["ground"]["contact_sole_points"] > 0
+        assert floor["applied"] == floor.get("planted_feet_only", False) == (run != "off"), floor
+        assert run == "off" or fit.report["ground"]["contact_sole_points"] > 0
+        errors[run] = joint_errors(model, fit.params, truth)["mpjpe_m"]
     assert errors["auto"] < 0.75 * errors["off"], errors
+    # its height stated, it is also moved to its size along each frame's rays
+    assert "height_as_fitted_alone_m" in fit.report["ground"] and "stated_not_used" not in floor, floor
+    assert errors["stated"] < 0.75 * errors["auto"], errors
 
 
 def test_several_people_under_a_moving_camera_land_on_one_floor(model, tmp_path, monkeypatch):

@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from glimpse.errors import ConfigError
+
+STATED_HEIGHT_RANGE_M = (0.5, 2.5)  # a person's standing height, metres: outside this a stated one is a typo
+
 
 @dataclass(frozen=True)
 class FitWeights:
@@ -27,6 +31,7 @@ class GroundConfig:
     mode: Literal["auto", "off"]
     moving_camera: Literal["common_floor", "planted_feet"]
     contact_speed_m_s: float
+    contact_span_s: float
     contact_height_m: float
     normal_prior_m: float
     moving_normal_prior_m: float
@@ -37,6 +42,7 @@ class GroundConfig:
     max_placement_factor: float
     parallax_max_error: float
     parallax_size_error: float
+    person_heights_m: list[str]
     iterations: int
 
 
@@ -64,3 +70,23 @@ class FitConfig:
     robust_scale_anneal: list[float]
     ground: GroundConfig
     overlay: bool
+
+
+def stated_person_heights(g: GroundConfig) -> dict[str, float]:
+    """``ground.person_heights_m`` as pid -> standing height in metres; malformed entries are errors."""
+    heights: dict[str, float] = {}
+    low, high = STATED_HEIGHT_RANGE_M
+    for entry in g.person_heights_m:
+        pid, sep, text = str(entry).partition("=")
+        pid = pid.strip()
+        try:
+            metres = float(text) if sep and pid else float("nan")
+        except ValueError:
+            metres = float("nan")
+        if not low <= metres <= high:
+            raise ConfigError(f"02_smpl_fit.ground.person_heights_m: {entry!r} is not PID=METRES with a standing "
+                              f"height from {low} to {high} m (e.g. p0=1.75)")
+        if pid in heights:
+            raise ConfigError(f"02_smpl_fit.ground.person_heights_m: person {pid!r} is given twice")
+        heights[pid] = metres
+    return heights

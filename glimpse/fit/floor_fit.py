@@ -32,7 +32,7 @@ from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams
 from glimpse.cameras.model import PinholeCamera
 from glimpse.errors import GlimpseError
-from glimpse.fit.config import FitConfig, GroundConfig
+from glimpse.fit.config import FitConfig, GroundConfig, stated_person_heights
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, implausible_factors,
                                 lowest_points, near_own_plane, parallax_factor, person_camera_heights,
                                 placement_factors, plane_weights, speed_across_view, standing_weights)
@@ -78,7 +78,23 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
                           config: FitConfig, fps: float) -> dict:
     """Put the 2D-fitted people of ``pending`` on one floor and refit them (updating their outcomes);
     ``models`` gives each person's body model, ``fps`` is the scene's frame rate. Returns the floor report
-    (``applied`` false with the reason when the step does not apply)."""
+    (``applied`` false with the reason when the step does not apply; ``stated_not_used`` names the people of
+    ``ground.person_heights_m`` whose height had nothing to act through)."""
+    report = _place(pending, models, cameras, config, fps)
+    g = config.ground
+    scaled = {p.person.pid for p in pending if "height_as_fitted_alone_m" in p.ground}
+    unused = [pid for pid in stated_person_heights(g) if pid not in scaled]
+    if unused:
+        report["stated_not_used"] = (f"02_smpl_fit.ground.person_heights_m ({', '.join(unused)}): a stated height "
+                                     f"acts through the common floor on a person fitted from 2D keypoints in a metric "
+                                     f"frame (a moving camera's lone person: on itself), which it did not get here "
+                                     f"(see reason or why)")
+    return report
+
+
+def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, PinholeCamera], config: FitConfig,
+           fps: float) -> dict:
+    """place_on_common_floor's work."""
     g = config.ground
     frame_centres = {f: cameras[f].centre for f in sorted(cameras)}
     centres = np.stack(list(frame_centres.values()))
@@ -96,7 +112,7 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
     if not static:
         planted_why = _why_planted_feet_only(pending, g)
         if planted_why is not None:
-            return _plant_feet(pending, feet, soles_bodies, g, planted_why)
+            return _plant_feet(pending, feet, soles_bodies, g, planted_why, _stated_factors(pending, models, g))
     centre = centres[0] if static else centres.mean(0)  # a moving camera's heights are measured from its mean
     up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
     if np.linalg.norm(up_hint) <= 0:
@@ -123,6 +139,9 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
         parallax = [_parallax(p, f, rank, config) for p, f in zip(pending, feet)]
         measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)])
         measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax])
+    stated = _stated_factors(pending, models, g)
+    if np.isfinite(stated).any():  # heights the user knows outweigh every cue measured here
+        measured, measured_weights = stated * heights, np.ones(len(pending))
     camera_height, factors = placement_factors(heights, anchored, trust, measured, measured_weights)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
@@ -139,13 +158,15 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
         if parallax:
             p.ground["parallax_factor"] = parallax[k][0] if np.isfinite(parallax[k][0]) else None
+        if np.isfinite(stated[k] * height):  # the height it was fitted at, before it was scaled to the stated one
+            p.ground["height_as_fitted_alone_m"] = float(stated_person_heights(g)[p.person.pid] / stated[k])
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor))
             p.seconds += time.perf_counter() - started
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
             "camera_height": camera_height, "camera_moves": not static,
-            "camera_height_from": _camera_height_from(pending, anchored, measured),
+            "camera_height_from": _camera_height_from(pending, anchored, measured, stated),
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
 
 
@@ -163,11 +184,29 @@ def _parallax(pending: PendingFit, feet: _Feet, rank: dict[int, int], config: Fi
     return factor, error
 
 
-def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measured: np.ndarray | None) -> str:
+def _stated_factors(pending: list[PendingFit], models: BodyModels, g: GroundConfig) -> np.ndarray:
+    """[P] for each 2D-fitted person of ``ground.person_heights_m``, that height over its fitted standing height
+    (the factor that makes it as tall as stated); nan for everyone else."""
+    known = stated_person_heights(g)
+    factors = np.full(len(pending), np.nan)
+    for k, p in enumerate(pending):
+        if p.person.pid in known and p.mode == "keypoints2d":
+            state = p.outcome.state
+            with torch.no_grad():
+                fitted = float(models[p.person.pid].stature(state.betas) * state.log_scale.exp())
+            factors[k] = known[p.person.pid] / fitted
+    return factors
+
+
+def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measured: np.ndarray | None,
+                        stated: np.ndarray) -> str:
     """What set the camera's height above the common floor, in words (ground.json)."""
     anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     if anchors:
         return "people placed metrically: " + ", ".join(anchors)
+    told = [p.person.pid for p, s in zip(pending, stated) if np.isfinite(s)]
+    if told:
+        return "the heights stated in 02_smpl_fit.ground.person_heights_m: " + ", ".join(told)
     cued = [p.person.pid for p, m in zip(pending, measured if measured is not None else []) if np.isfinite(m)]
     if cued:
         return ("the parallax of planted feet as the camera moves (each person's factor that makes them stand "
@@ -206,14 +245,21 @@ def _static(centres: np.ndarray) -> bool:
 
 
 def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list[KeypointBody],
-                g: GroundConfig, why: str) -> dict:
+                g: GroundConfig, why: str, stated: np.ndarray) -> dict:
     """A moving camera without the common floor (``why``): each 2D-fitted person is refitted with its feet
-    held still while they touch the ground, which, seen from the camera's path, pins where the person stands."""
-    for p, f, soles_body in zip(pending, feet, soles_bodies):
+    held still while they touch the ground, which, seen from the camera's path, pins where the person stands.
+    A person of stated height in a metric frame is first moved along each frame's rays to that height (by
+    its ``stated`` [P] factor, nan where none)."""
+    for k, (p, f, soles_body) in enumerate(zip(pending, feet, soles_bodies)):
         p.ground = {"contact_sole_points": int(f.contact.sum())}
         if p.mode == "keypoints2d":
+            factor = 1.0
+            if np.isfinite(stated[k]) and not p.schedule.fit_scale:
+                factor = float(stated[k])
+                p.ground["factor"] = factor
+                p.ground["height_as_fitted_alone_m"] = stated_person_heights(g)[p.person.pid] / factor
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g)
+            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor)
             p.seconds += time.perf_counter() - started
     return {"applied": True, "planted_feet_only": True,
             "why": f"the camera moves and {why}: each person fitted from 2D keypoints is refitted with its feet still "
@@ -244,7 +290,8 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.n
     standing = standing_weights(up, joints[:, HIPS], joints[:, KNEES], config.ground.standing_thigh_deg)
     g = config.ground
     frame_centres = np.stack([centres[int(f)] for f in frame_ids])
-    speed = speed_across_view(soles, times, frame_ids, frame_centres, config.max_interpolated_gap)
+    speed = speed_across_view(soles, times, frame_ids, frame_centres, config.max_interpolated_gap,
+                              g.contact_span_s)
     return _Feet(soles, up, frame_ids, frame_centres, standing,
                  foot_contacts(soles, up, speed, scale, g.contact_speed_m_s, g.contact_height_m))
 
@@ -252,12 +299,13 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.n
 def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: GroundConfig, floor: Floor | None = None,
            factor: float = 1.0) -> dict:
     """Refit ``pending`` moved by ``factor`` about each frame's camera centre onto ``floor``; without a floor,
-    with planted feet only and not moved."""
+    with planted feet only (moved only where a stated height gives a factor)."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None
-    if floor is not None:
+    if floor is not None or factor != 1.0:
         state = rescale_about(state, energy.body, torch.as_tensor(feet.centres, dtype=dtype), factor, g.shape_ridge)
+    if floor is not None:
         plane = (torch.as_tensor(floor.normal, dtype=dtype), torch.as_tensor(floor.camera_centre, dtype=dtype),
                  floor.camera_height)
     energy.floor = FloorContact(soles_body, torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m,

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SOLE_LANDMARKS = ("left_heel", "left_big_toe", "right_heel", "right_big_toe")  # the sole points a foot stands on
+SPAN_TOLERANCE_S = 1e-9  # frame times are frame ids / fps: 1 / 8 s apart counts as at least 1 / 8 s
 
 
 def height_above_plane(points, normal, camera_centre, camera_height: float):
@@ -43,17 +44,20 @@ class Floor:
 
 
 def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.ndarray, camera_centre: np.ndarray,
-                      max_gap_frames: int) -> np.ndarray:
+                      max_gap_frames: int, span_s: float = 0.0) -> np.ndarray:
     """[T, S] speed of points [T, S, 3] across the camera's view (the component along the viewing ray
-    dropped: a 2D fit's depth jitters, its image position does not), from the neighbouring frames at
-    most ``max_gap_frames`` away (one-sided at the ends, inf where a frame has no neighbour).
-    ``camera_centre``: [3], or [T, 3] for a moving camera (each frame's centre)."""
+    dropped: a 2D fit's depth jitters, its image position does not), between the nearest frames at least
+    ``span_s`` seconds before and after (the farthest reachable where the track is shorter; one-sided at the
+    ends; inf where a frame has no neighbour). Frames more than ``max_gap_frames`` apart are not bridged.
+    With ``span_s`` 0 the neighbours are the adjacent frames; a span keeps the frame-to-frame jitter of a fast
+    video (33 fps) from reading as speed (jitter over a difference shrinks as the time between its frames
+    grows). ``camera_centre``: [3], or [T, 3] for a moving camera (each frame's centre)."""
     frames = len(points)
     camera_centre = np.broadcast_to(camera_centre, (frames, 3))
     speed = np.full(points.shape[:2], np.inf)
     for t in range(frames):
-        before = t - 1 if t > 0 and frame_ids[t] - frame_ids[t - 1] <= max_gap_frames else t
-        after = t + 1 if t + 1 < frames and frame_ids[t + 1] - frame_ids[t] <= max_gap_frames else t
+        before = _neighbour_at(times_s, frame_ids, t, -1, max_gap_frames, span_s)
+        after = _neighbour_at(times_s, frame_ids, t, 1, max_gap_frames, span_s)
         if before == after:
             continue
         velocity = (points[after] - points[before]) / (times_s[after] - times_s[before])
@@ -62,6 +66,18 @@ def speed_across_view(points: np.ndarray, times_s: np.ndarray, frame_ids: np.nda
         across = velocity - (velocity * ray).sum(-1, keepdims=True) * ray
         speed[t] = np.linalg.norm(across, axis=-1)
     return speed
+
+
+def _neighbour_at(times_s: np.ndarray, frame_ids: np.ndarray, t: int, step: int, max_gap_frames: int,
+                  span_s: float) -> int:
+    """Index of the nearest frame ``step`` (-1 or 1) ways from t that is at least ``span_s`` away in time,
+    walking over frames at most ``max_gap_frames`` apart; the farthest reached when none is, t when none is."""
+    k = t
+    while 0 <= k + step < len(times_s) and abs(int(frame_ids[k + step]) - int(frame_ids[k])) <= max_gap_frames:
+        k += step
+        if abs(times_s[k] - times_s[t]) >= span_s - SPAN_TOLERANCE_S:
+            break
+    return k
 
 
 def foot_contacts(soles: np.ndarray, up: np.ndarray, speed_m_s: np.ndarray, body_scale: float,

@@ -26,7 +26,7 @@ from glimpse.cameras.align import rotation_between
 from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
-from glimpse.fit.config import FitConfig
+from glimpse.fit.config import FitConfig, stated_person_heights
 from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
@@ -135,6 +135,11 @@ class Fitter:
         """Every person fitted, then those fitted from 2D keypoints placed on one floor (glimpse.fit.floor_fit)
         when 02_smpl_fit.ground allows; ``progress`` wraps the per-person loop (tqdm). Returns the fits and
         the floor's report."""
+        g = self.config.ground
+        unknown = sorted(set(stated_person_heights(g)) - {person.pid for person in people})
+        if unknown:  # before the fits, which take minutes
+            raise GlimpseError(f"02_smpl_fit.ground.person_heights_m names {', '.join(unknown)}, not in the scene "
+                               f"(its people: {', '.join(person.pid for person in people)})")
         pending = [self.start(person) for person in progress(people)]
         floor = place_on_common_floor(pending, self.models, self.cameras, self.config, self.scene.fps)
         return [self.finish(p) for p in pending], floor
