@@ -105,7 +105,10 @@ def stated_truth(model: BodyModel, scene_dir: Path, state: str, config: FitConfi
     that person's standing height to the cm (02_smpl_fit.ground.person_heights_m), or ``none``."""
     if state == "none":
         return config
-    truth = np.load(scene_dir.with_name(scene_dir.name + ".groundtruth") / f"{state}_body.npz")
+    path = scene_dir.with_name(scene_dir.name + ".groundtruth") / f"{state}_body.npz"
+    if not path.exists():
+        raise SystemExit(f"--state {state}: the fixture {scene_dir.name} has no person {state} (choose scenarios that do)")
+    truth = np.load(path)
     height = float(model.stature(truth["betas"])) * float(truth["scale"] if "scale" in truth else 1.0)
     return replace(config, ground=replace(config.ground, person_heights_m=[f"{state}={height:.2f}"]))
 

@@ -95,10 +95,14 @@ def test_a_stated_height_is_read_and_the_fitted_one_measured(model):
                                              "ground": {**ground, "person_heights_m": ["p0=1.88", " p1 = 1.39"]}},
                                  "x").ground
     assert stated_person_heights(parsed) == {"p0": 1.88, "p1": 1.39}
-    for entries, message in ((["p0"], "not PID=METRES"), (["p0=188"], "from 0.5 to 2.5"),
-                             (["p0=1.8", "p0=1.7"], "given twice")):
+    # two stated people who disagree: their median is their mean, not the lower one
+    camera_height, _ = placement_factors(np.array([1.4, 1.6]), np.zeros(2, bool), None, np.array([1.45, 1.55]),
+                                         np.ones(2))
+    assert camera_height == pytest.approx(1.5)
+    for entries, span, message in ((["p0"], 0.1, "not PID=METRES"), (["p0=188"], 0.1, "from 0.5 to 2.5"),
+                                   (["p0=1.8", "p0=1.7"], 0.1, "given twice"), ([], -0.1, "contact_span_s")):
         bad = config_from_mapping(FitConfig, {**load_pipeline_yaml()["02_smpl_fit"], "ground": {
-            **ground, "person_heights_m": entries}}, "x").ground
+            **ground, "person_heights_m": entries, "contact_span_s": span}}, "x").ground
         with pytest.raises(ConfigError, match=message):
             stated_person_heights(bad)
 
@@ -113,7 +117,7 @@ def test_a_stated_height_is_checked_before_any_fit_and_reported_when_not_used(mo
         **raw["ground"], "person_heights_m": ["p0=1.8", "p7=1.7"]}}, "x")
     fitter = Fitter(scene, BodyModels(model), cameras, config, "metres")
     monkeypatch.setattr(fitter, "start", lambda person: pytest.fail("fitted before the stated heights were checked"))
-    with pytest.raises(GlimpseError, match=r"person_heights_m names p7, not in the scene \(its people: p0, p1\)"):
+    with pytest.raises(GlimpseError, match=r"person_heights_m names p7, not among the people fitted \(p0, p1\)"):
         fitter.fit_people(list(scene.humans.values()))
     monkeypatch.undo()
     # without a common floor (here: switched off) a stated height is not used, and the floor's report says so
@@ -342,6 +346,8 @@ def test_an_adult_and_a_child_fitted_from_2d_keypoints_land_on_one_floor(model, 
     assert abs(np.log(ratios[0] / ratios[1])) < 0.05
     if adults_height == "stated":
         assert "person_heights_m: p0" in floor["camera_height_from"], floor
+        report = fits[0].report["ground"]  # scaled to about the stated height (its skeleton is fitted, not its stature)
+        assert abs(report["height_m"] - report["stated_height_m"]) < 0.05, report
         assert np.abs(np.log(ratios)).max() < 0.03, ratios  # at their distance (the prior's size: 6-7% off)
 
 

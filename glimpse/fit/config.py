@@ -73,7 +73,8 @@ class FitConfig:
 
 
 def stated_person_heights(g: GroundConfig) -> dict[str, float]:
-    """``ground.person_heights_m`` as pid -> standing height in metres; malformed entries are errors."""
+    """``ground.person_heights_m`` as pid -> standing height in metres; malformed entries (and a negative
+    ``contact_span_s``, read in the same step) are errors."""
     heights: dict[str, float] = {}
     low, high = STATED_HEIGHT_RANGE_M
     for entry in g.person_heights_m:
@@ -89,4 +90,6 @@ def stated_person_heights(g: GroundConfig) -> dict[str, float]:
         if pid in heights:
             raise ConfigError(f"02_smpl_fit.ground.person_heights_m: person {pid!r} is given twice")
         heights[pid] = metres
+    if not g.contact_span_s >= 0:
+        raise ConfigError(f"02_smpl_fit.ground.contact_span_s must be 0 or more (seconds), found {g.contact_span_s}")
     return heights

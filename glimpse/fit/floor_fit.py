@@ -82,13 +82,14 @@ def place_on_common_floor(pending: list[PendingFit], models: BodyModels, cameras
     ``ground.person_heights_m`` whose height had nothing to act through)."""
     report = _place(pending, models, cameras, config, fps)
     g = config.ground
-    scaled = {p.person.pid for p in pending if "height_as_fitted_alone_m" in p.ground}
+    scaled = {p.person.pid for p in pending if "stated_height_m" in p.ground}
     unused = [pid for pid in stated_person_heights(g) if pid not in scaled]
     if unused:
         report["stated_not_used"] = (f"02_smpl_fit.ground.person_heights_m ({', '.join(unused)}): a stated height "
-                                     f"acts through the common floor on a person fitted from 2D keypoints in a metric "
-                                     f"frame (a moving camera's lone person: on itself), which it did not get here "
-                                     f"(see reason or why)")
+                                     f"sets the size of a person fitted from 2D keypoints in a metric frame, on the "
+                                     f"common floor unless people placed metrically set it (or, with planted feet "
+                                     f"only, on the person alone); here it did not (no floor, no ground points, "
+                                     f"another mode, or SfM units: see reason, why and camera_height_from)")
     return report
 
 
@@ -112,7 +113,8 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     if not static:
         planted_why = _why_planted_feet_only(pending, g)
         if planted_why is not None:
-            return _plant_feet(pending, feet, soles_bodies, g, planted_why, _stated_factors(pending, models, g))
+            return _plant_feet(pending, feet, soles_bodies, g, planted_why, _stated_factors(pending, models, g),
+                               models)
     centre = centres[0] if static else centres.mean(0)  # a moving camera's heights are measured from its mean
     up_hint = sum((f.standing[:, None] * f.up).sum(0) for f in feet)
     if np.linalg.norm(up_hint) <= 0:
@@ -140,6 +142,7 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
         measured = np.array([factor * height for (factor, _), height in zip(parallax, heights)])
         measured_weights = np.array([1.0 / (error**2 + g.parallax_size_error**2) for _, error in parallax])
     stated = _stated_factors(pending, models, g)
+    stated[~np.isfinite(heights) | anchored.any()] = np.nan  # no ground points, or people placed metrically decide
     if np.isfinite(stated).any():  # heights the user knows outweigh every cue measured here
         measured, measured_weights = stated * heights, np.ones(len(pending))
     camera_height, factors = placement_factors(heights, anchored, trust, measured, measured_weights)
@@ -158,12 +161,12 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
                     "camera_height_above_own_ground": float(height) if np.isfinite(height) else None}
         if parallax:
             p.ground["parallax_factor"] = parallax[k][0] if np.isfinite(parallax[k][0]) else None
-        if np.isfinite(stated[k] * height):  # the height it was fitted at, before it was scaled to the stated one
-            p.ground["height_as_fitted_alone_m"] = float(stated_person_heights(g)[p.person.pid] / stated[k])
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor))
             p.seconds += time.perf_counter() - started
+        if np.isfinite(stated[k]):
+            _report_stated_height(p, models, g, stated[k])
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
             "camera_height": camera_height, "camera_moves": not static,
             "camera_height_from": _camera_height_from(pending, anchored, measured, stated),
@@ -191,11 +194,23 @@ def _stated_factors(pending: list[PendingFit], models: BodyModels, g: GroundConf
     factors = np.full(len(pending), np.nan)
     for k, p in enumerate(pending):
         if p.person.pid in known and p.mode == "keypoints2d":
-            state = p.outcome.state
-            with torch.no_grad():
-                fitted = float(models[p.person.pid].stature(state.betas) * state.log_scale.exp())
-            factors[k] = known[p.person.pid] / fitted
+            factors[k] = known[p.person.pid] / _fitted_height(p, models)
     return factors
+
+
+def _fitted_height(pending: PendingFit, models: BodyModels) -> float:
+    """The person's standing height as its fit now stands (metres: the shape's stature times the fitted scale)."""
+    state = pending.outcome.state
+    with torch.no_grad():
+        return float(models[pending.person.pid].stature(state.betas) * state.log_scale.exp())
+
+
+def _report_stated_height(pending: PendingFit, models: BodyModels, g: GroundConfig, factor: float) -> None:
+    """A stated person's ``ground`` report: the stated height, the height its own fit gave before it was scaled by
+    ``factor``, and the height after the refit (the rescale fits its skeleton, not its stature: within a few cm)."""
+    stated = stated_person_heights(g)[pending.person.pid]
+    pending.ground.update({"stated_height_m": stated, "height_as_fitted_alone_m": stated / factor,
+                           "height_m": _fitted_height(pending, models)})
 
 
 def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measured: np.ndarray | None,
@@ -245,7 +260,7 @@ def _static(centres: np.ndarray) -> bool:
 
 
 def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list[KeypointBody],
-                g: GroundConfig, why: str, stated: np.ndarray) -> dict:
+                g: GroundConfig, why: str, stated: np.ndarray, models: BodyModels) -> dict:
     """A moving camera without the common floor (``why``): each 2D-fitted person is refitted with its feet
     held still while they touch the ground, which, seen from the camera's path, pins where the person stands.
     A person of stated height in a metric frame is first moved along each frame's rays to that height (by
@@ -257,10 +272,11 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
             if np.isfinite(stated[k]) and not p.schedule.fit_scale:
                 factor = float(stated[k])
                 p.ground["factor"] = factor
-                p.ground["height_as_fitted_alone_m"] = stated_person_heights(g)[p.person.pid] / factor
             started = time.perf_counter()
             p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor)
             p.seconds += time.perf_counter() - started
+            if factor != 1.0:
+                _report_stated_height(p, models, g, factor)
     return {"applied": True, "planted_feet_only": True,
             "why": f"the camera moves and {why}: each person fitted from 2D keypoints is refitted with its feet still "
                    f"while they touch the ground (no common floor plane, no placement factors)"}

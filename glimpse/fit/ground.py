@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SOLE_LANDMARKS = ("left_heel", "left_big_toe", "right_heel", "right_big_toe")  # the sole points a foot stands on
-SPAN_TOLERANCE_S = 1e-9  # frame times are frame ids / fps: 1 / 8 s apart counts as at least 1 / 8 s
+SPAN_TOLERANCE_S = 1e-9  # frame times are frame ids / fps: 3 / 30 s apart counts as at least 0.1 s
 
 
 def height_above_plane(points, normal, camera_centre, camera_height: float):
@@ -75,7 +75,7 @@ def _neighbour_at(times_s: np.ndarray, frame_ids: np.ndarray, t: int, step: int,
     k = t
     while 0 <= k + step < len(times_s) and abs(int(frame_ids[k + step]) - int(frame_ids[k])) <= max_gap_frames:
         k += step
-        if abs(times_s[k] - times_s[t]) >= span_s - SPAN_TOLERANCE_S:
+        if span_s <= 0 or abs(times_s[k] - times_s[t]) >= span_s - SPAN_TOLERANCE_S:
             break
     return k
 
@@ -188,10 +188,15 @@ def placement_factors(heights: np.ndarray, anchored: np.ndarray, weights: np.nda
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    """The first of the sorted ``values`` [N] at which the cumulative ``weights`` [N] reach half their total."""
+    """The first of the sorted ``values`` [N] at which the cumulative ``weights`` [N] reach half their total; the
+    mean of it and the next where they reach exactly half (equal weights: the usual median)."""
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    half = 0.5 * cumulative[-1]
+    k = int(np.searchsorted(cumulative, half))
+    if k + 1 < len(values) and np.isclose(cumulative[k], half, rtol=1e-12, atol=0.0):
+        return float(0.5 * (values[order][k] + values[order][k + 1]))
+    return float(values[order][k])
 
 
 def implausible_factors(factors: np.ndarray, max_factor: float) -> list[int]:

@@ -138,8 +138,8 @@ class Fitter:
         g = self.config.ground
         unknown = sorted(set(stated_person_heights(g)) - {person.pid for person in people})
         if unknown:  # before the fits, which take minutes
-            raise GlimpseError(f"02_smpl_fit.ground.person_heights_m names {', '.join(unknown)}, not in the scene "
-                               f"(its people: {', '.join(person.pid for person in people)})")
+            raise GlimpseError(f"02_smpl_fit.ground.person_heights_m names {', '.join(unknown)}, not among the "
+                               f"people fitted ({', '.join(person.pid for person in people)})")
         pending = [self.start(person) for person in progress(people)]
         floor = place_on_common_floor(pending, self.models, self.cameras, self.config, self.scene.fps)
         return [self.finish(p) for p in pending], floor

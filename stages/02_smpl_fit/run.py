@@ -64,7 +64,8 @@ def run(ctx: StageContext) -> None:
                                 keypoints)
         ctx.formats["overlay.mp4"] = "mp4/h264"
     ctx.summary["modes"] = {fit.pid: fit.mode for fit in fits}
-    ctx.summary["ground"] = {k: floor[k] for k in ("applied", "reason", "camera_height", "factors") if k in floor}
+    ctx.summary["ground"] = {k: floor[k] for k in ("applied", "reason", "camera_height", "camera_height_from", "factors",
+                                                    "stated_not_used") if k in floor}
     ctx.summary["keypoint_residuals"] = {
         fit.pid: {k: v["mean"] for k, v in fit.report.items() if k.endswith(("_residual_m", "_residual_px")) and v}
         for fit in fits}
