@@ -164,11 +164,8 @@ class BodyModel(torch.nn.Module):
     def stature(self, betas: TensorLike) -> Tensor:
         """[] standing height of the shape ``betas`` [num_betas]: the rest pose's extent along the model's up
         (y), from the soles to the top of the head, in metres before any scale."""
-        batch = 1
-        out = lbs(self._per_body(betas, batch, (self.num_betas,), "betas"),
-                  torch.zeros(batch, AXIS_ANGLE_DIM + BODY_POSE_DIM, dtype=self.dtype, device=self.device),
-                  self.v_template, self.shapedirs, self.posedirs, self.J_regressor, self._parent_list, self.weights)
-        up = out.rest_vertices[0, :, 1]
+        zero = torch.zeros(1, AXIS_ANGLE_DIM, dtype=self.dtype, device=self.device)
+        up = self(betas, zero, zero.new_zeros(1, BODY_POSE_DIM)).rest_vertices[0, :, 1]
         return up.max() - up.min()
 
     # ------------------------------------------------------------------ input handling
