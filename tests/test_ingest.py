@@ -258,6 +258,40 @@ def test_user_onnx_models_plug_in(demo_video, tmp_path: Path) -> None:
         assert np.ptp(keypoints[..., :2], axis=1).max() < 1e-6
 
 
+@needs_models
+def test_the_median_over_moved_crops_changes_the_keypoints_and_nothing_else(demo_video, tmp_path: Path) -> None:
+    """keypoint_crop_shifts: the written keypoints are a median over more crops; the people, their frames and
+    masks are the tracking's, the same with and without it, and so are the confidences and metric 3D landmarks
+    where the left/right step (which reads the written keypoints) exchanges the same frames, as here."""
+    from dataclasses import replace
+
+    from glimpse.io.images import read_mask
+
+    _, video = demo_video
+    short = replace(CONFIG, max_frames=8, preview=False, track_min_frames=1)
+    assert short.keypoint_crop_shifts
+    ingest(video, tmp_path / "median", short)
+    ingest(video, tmp_path / "own", replace(short, keypoint_crop_shifts=[]))
+    median, own = load_scene(tmp_path / "median"), load_scene(tmp_path / "own")
+    exchanged = [{pid: person["sides_exchanged"] for pid, person in json.loads((tmp_path / name / REPORT_FILE)
+                                                                             .read_text())["people"].items()}
+                 for name in ("median", "own")]
+    assert exchanged[0] == exchanged[1]
+    assert sorted(median.humans) == sorted(own.humans) and median.humans
+    moved = []
+    for pid, person in median.humans.items():
+        a, b = read_keypoints2d(person.keypoints2d), read_keypoints2d(own.humans[pid].keypoints2d)
+        assert a.frame_ids.tolist() == b.frame_ids.tolist() and sorted(person.masks) == sorted(own.humans[pid].masks)
+        for frame, path in person.masks.items():
+            assert (read_mask(path) == read_mask(own.humans[pid].masks[frame])).all()
+        np.testing.assert_array_equal(a.keypoints[..., 2], b.keypoints[..., 2])
+        np.testing.assert_array_equal(a.relative3d, b.relative3d)
+        found = a.keypoints[..., 2] > 0
+        moved.append(np.linalg.norm(a.keypoints[..., :2] - b.keypoints[..., :2], axis=-1)[found])
+    moved = np.concatenate(moved)
+    assert 0 < np.median(moved) < 5.0  # pixels at 480x360: another estimate of the same points
+
+
 def test_focal_length_tag_gives_the_intrinsics(tmp_path: Path) -> None:
     from glimpse.ingest.survey import intrinsics_from_focal
 

@@ -348,11 +348,13 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
 
 
 def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -> None:
+    from dataclasses import replace
+
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.tracker import Observation, Track, Tracker
 
-    config = load_ingest_config()
+    config = replace(load_ingest_config(), keypoint_crop_shifts=[])  # no model here to take the keypoints again
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
     red, blue = np.zeros((2, 36)), np.zeros((2, 36))
     red[:, 0], blue[:, 20] = 1.0, 1.0  # all their pixels in one, different, hue bin
@@ -552,3 +554,44 @@ def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_tha
     followed, fresh = {0: slid}, [observation(60.0, 0.65)]  # hardly better: a new person beside them
     tracker._reclaim(fresh, followed)
     assert followed[0] is slid and len(fresh) == 1
+
+
+def test_the_written_keypoints_are_the_median_over_crops_moved_sideways() -> None:
+    """BlazePose.median_points: the region's own runs and those of its crop moved along the crop's x axis by
+    +-shift x side, each with its mirror; one crop's gross error (a knee put on the other leg) does not move the
+    median, where it would move a mean."""
+    from dataclasses import replace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS, BlazePose
+
+    truth = np.random.default_rng(0).uniform(100, 300, (BODY_LANDMARKS, 2))
+    region = Region(np.array([200.0, 180.0]), 240.0, np.pi / 2)  # turned: the crop's x axis is the image's y
+    image = np.zeros((400, 400, 3), np.uint8)
+
+    class Crops(BlazePose):
+        """Every crop's runs put the landmarks at ``truth``, but the first moved crop's mirrored run puts the left
+        knee 60 crop pixels off."""
+
+        def __init__(self) -> None:  # no model files
+            self.regions: list[Region] = []
+
+        def _crop_runs(self, image, region, refine, mirror):
+            self.regions.append(region)
+            to_crop = np.linalg.inv(np.vstack([crop_affine(region, LANDMARK_SIZE), [0, 0, 1]]))
+            raw = np.zeros((LANDMARK_COUNT, LANDMARK_VALUES))
+            raw[:BODY_LANDMARKS, :2] = (np.c_[truth, np.ones(BODY_LANDMARKS)] @ to_crop.T)[:, :2] + 0.5
+            wrong = raw.copy()
+            wrong[25, :2] += 60.0 if len(self.regions) == 1 else 0.0
+            runs = [(raw.ravel(), 1.0, None, None), (wrong.ravel(), 1.0, None, None)]
+            return runs if mirror else runs[1:]
+
+    model = Crops()
+    own_runs = replace(_landmarks_at(truth, region), run_points=np.stack([truth, truth]))
+    np.testing.assert_allclose(model.median_points(image, own_runs, (0.05,), True, True), truth, atol=1e-9)
+    sideways = 0.05 * 240.0 * np.array([0.0, 1.0])
+    np.testing.assert_allclose([r.centre for r in model.regions], [region.centre + sideways, region.centre - sideways],
+                               atol=1e-9)
+    assert all(r.side == region.side and r.angle == region.angle for r in model.regions)
+    model.regions.clear()  # no mirrors: 3 runs, 1 of them off, still give the truth (their mean would not)
+    one_run = replace(own_runs, run_points=truth[None])
+    np.testing.assert_allclose(model.median_points(image, one_run, (0.05,), True, False), truth, atol=1e-9)

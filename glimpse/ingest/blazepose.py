@@ -15,7 +15,7 @@ classes only hold the interpreters.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -151,6 +151,7 @@ class PoseLandmarks:
     next_region: Region  # where this person will be looked for in the next frame
     segmentation: np.ndarray  # [256, 256] probability that a crop pixel shows this person
     region: Region  # the region the landmarks were found in
+    run_points: np.ndarray | None = None  # [R, 33, 2] image pixels of each run ``points`` averages (crop, mirror)
 
     def coco17(self) -> tuple[np.ndarray, np.ndarray]:
         """([17, 2] pixels, [17] confidence = visibility x presence) in COCO-17 order."""
@@ -291,18 +292,48 @@ class BlazePose:
             raw = refine_with_heatmap(raw, heatmap)
         return raw, float(np.ravel(score)[0]), world, segmentation[..., 0]
 
+    def _crop_runs(self, image: np.ndarray, region: Region, refine: bool, mirror: bool
+                   ) -> list[tuple[np.ndarray, float, np.ndarray, np.ndarray]]:
+        """The landmark model's (raw, score, world, segmentation) for ``region``'s crop and, with ``mirror``, for
+        the mirrored crop, unmirrored and each left/right pair matched to the first run's (the model may call a
+        side-on person's left what its mirrored run calls right)."""
+        crop = crop_image(image, region, LANDMARK_SIZE).astype(np.float32) / 255.0
+        runs = [self._landmark_outputs(crop, refine)]
+        if mirror:
+            raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
+            raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
+            swaps = sides_to_swap(runs[0][0], raw_m)
+            raw_m = swap_sides(raw_m.reshape(-1, LANDMARK_VALUES), swaps).ravel()
+            world_m = swap_sides(world_m.reshape(-1, 3), swaps).ravel()
+            runs.append((raw_m, score_m, world_m, segmentation_m))
+        return runs
+
     def landmarks(self, image: np.ndarray, region: Region, refine: bool = True, mirror_average: bool = False
                   ) -> PoseLandmarks:
         """The person in ``region`` of ``image`` [H, W, 3] uint8. refine: MediaPipe's heatmap refinement;
         mirror_average: also run on the mirrored crop and average the two (test-time augmentation)."""
-        crop = crop_image(image, region, LANDMARK_SIZE).astype(np.float32) / 255.0
-        raw, score, world, segmentation = self._landmark_outputs(crop, refine)
-        if mirror_average:
-            raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
-            raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
-            swaps = sides_to_swap(raw, raw_m)
-            raw_m = swap_sides(raw_m.reshape(-1, LANDMARK_VALUES), swaps).ravel()
-            world_m = swap_sides(world_m.reshape(-1, 3), swaps).ravel()
-            raw, world = (raw + raw_m) / 2, (world.ravel() + world_m) / 2
-            segmentation, score = (segmentation + segmentation_m) / 2, (score + score_m) / 2
-        return decode_landmarks(raw, score, world, segmentation, region)
+        runs = self._crop_runs(image, region, refine, mirror_average)
+        raw, world = sum(r[0] for r in runs) / len(runs), sum(r[2].ravel() for r in runs) / len(runs)
+        segmentation, score = sum(r[3] for r in runs) / len(runs), sum(r[1] for r in runs) / len(runs)
+        return replace(decode_landmarks(raw, score, world, segmentation, region),
+                       run_points=np.stack([_image_points(run[0], region) for run in runs]))
+
+    def median_points(self, image: np.ndarray, landmarks: PoseLandmarks, shifts: tuple[float, ...], refine: bool,
+                      mirror: bool) -> np.ndarray:
+        """[33, 2] image pixels: the per-coordinate median of ``landmarks``' runs and of the runs on its region
+        moved sideways (along the crop's x axis) by each of ``shifts`` (fractions of the side), both ways, each
+        with its mirror when ``mirror``; ``image`` is the one the landmarks were found in. A gross error of a few
+        crops (a knee put on the other leg) moves a median little, where it would move a mean."""
+        region = landmarks.region
+        sideways = region.side * np.array([np.cos(region.angle), np.sin(region.angle)])
+        points = list(landmarks.run_points if landmarks.run_points is not None else [landmarks.points])
+        for shift in shifts:
+            for sign in (1.0, -1.0):
+                moved = Region(region.centre + sign * shift * sideways, region.side, region.angle)
+                points += [_image_points(run[0], moved) for run in self._crop_runs(image, moved, refine, mirror)]
+        return np.median(np.stack(points), axis=0)
+
+
+def _image_points(raw: np.ndarray, region: Region) -> np.ndarray:
+    """[33, 2] image pixels of the body landmarks in the landmark model's raw output for ``region``'s crop."""
+    return crop_to_image(region, raw.reshape(-1, LANDMARK_VALUES)[:BODY_LANDMARKS, :2] - 0.5, LANDMARK_SIZE)

@@ -59,6 +59,7 @@ class IngestConfig:
     mask_depth_frames: int
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
+    keypoint_crop_shifts: list[float]
     sides_consistent: bool
     sides_keep_weight: float
     appearance_bins: int

@@ -42,6 +42,7 @@ from scipy.optimize import linear_sum_assignment
 
 from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
 from glimpse.ingest.blazepose import (
+    COCO17_FROM_BLAZEPOSE,
     REGION_GROW,
     BlazePose,
     Detections,
@@ -84,6 +85,7 @@ class Observation:
     keypoints: np.ndarray  # [17, 3] COCO-17 pixels and confidence (BlazePose's, or the ONNX pose model's)
     body: np.ndarray | None = None  # [H, W] bool, Tracker._body_pixels, computed once when first needed
     skeleton_distance: np.ndarray | None = None  # [H, W] float32 torso lengths, computed once when first needed
+    image: np.ndarray | None = None  # [H, W, 3] the image the landmarks were found in (people painted over or not)
 
 
 @dataclass
@@ -240,7 +242,7 @@ class Tracker:
         own = mask if covered is None else mask & ~covered
         look = appearance(image if original is None else original, own, split, config.appearance_bins)
         return Observation(found, probability, mask, box, look,
-                           depth_proxy(found), np.concatenate([points, confidence[:, None]], 1))
+                           depth_proxy(found), np.concatenate([points, confidence[:, None]], 1), image=image)
 
     # ------------------------------------------------------------------ one frame
     def step(self, frame_id: int, image: np.ndarray) -> list[tuple[Track, Observation]]:
@@ -273,6 +275,11 @@ class Tracker:
             if self.pose is not None:
                 points, scores = self.pose(image, observation.box)
                 observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
+            elif config.keypoint_crop_shifts:
+                median = self.model.median_points(observation.image, observation.landmarks,
+                                                  tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
+                                                  config.landmark_flip_average)
+                observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
             self._update(track, observation, frame_id)
             result.append((track, observation))
         return result
