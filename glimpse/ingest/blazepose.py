@@ -168,12 +168,17 @@ class PoseLandmarks:
         return self.world[list(COCO17_FROM_BLAZEPOSE)] @ turn.T
 
 
+def landmark_image_points(raw: np.ndarray, region: Region) -> np.ndarray:
+    """[39, 2] image pixels of every landmark in the landmark model's raw output [39 * 5] for ``region``'s crop
+    (its x, y are pixels of the 256x256 crop, from its edges)."""
+    return crop_to_image(region, raw.reshape(-1, LANDMARK_VALUES)[:, :2] - 0.5, LANDMARK_SIZE)
+
+
 def decode_landmarks(raw: np.ndarray, score: float, world: np.ndarray, segmentation_logits: np.ndarray,
                      region: Region) -> PoseLandmarks:
     """The landmark model's outputs for a crop of ``region`` -> :class:`PoseLandmarks` in image pixels."""
     values = raw.reshape(-1, LANDMARK_VALUES)
-    crop_points = values[:, :2]  # pixels of the 256x256 crop, from its edges
-    image_points = crop_to_image(region, crop_points - 0.5, LANDMARK_SIZE)
+    image_points = landmark_image_points(raw, region)
     centre, scale_point = image_points[list(ALIGNMENT_LANDMARKS)]
     return PoseLandmarks(
         points=image_points[:BODY_LANDMARKS], visibility=expit(values[:BODY_LANDMARKS, 3]),
@@ -316,7 +321,7 @@ class BlazePose:
         raw, world = sum(r[0] for r in runs) / len(runs), sum(r[2].ravel() for r in runs) / len(runs)
         segmentation, score = sum(r[3] for r in runs) / len(runs), sum(r[1] for r in runs) / len(runs)
         return replace(decode_landmarks(raw, score, world, segmentation, region),
-                       run_points=np.stack([_image_points(run[0], region) for run in runs]))
+                       run_points=np.stack([landmark_image_points(run[0], region)[:BODY_LANDMARKS] for run in runs]))
 
     def median_points(self, image: np.ndarray, landmarks: PoseLandmarks, shifts: tuple[float, ...], refine: bool,
                       mirror: bool) -> np.ndarray:
@@ -330,10 +335,6 @@ class BlazePose:
         for shift in shifts:
             for sign in (1.0, -1.0):
                 moved = Region(region.centre + sign * shift * sideways, region.side, region.angle)
-                points += [_image_points(run[0], moved) for run in self._crop_runs(image, moved, refine, mirror)]
+                points += [landmark_image_points(run[0], moved)[:BODY_LANDMARKS]
+                           for run in self._crop_runs(image, moved, refine, mirror)]
         return np.median(np.stack(points), axis=0)
-
-
-def _image_points(raw: np.ndarray, region: Region) -> np.ndarray:
-    """[33, 2] image pixels of the body landmarks in the landmark model's raw output for ``region``'s crop."""
-    return crop_to_image(region, raw.reshape(-1, LANDMARK_VALUES)[:BODY_LANDMARKS, :2] - 0.5, LANDMARK_SIZE)
