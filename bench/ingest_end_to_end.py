@@ -6,7 +6,8 @@ encoded to a video. Two scenes share the same frames (the ingest's, downscaled t
 runs at) and the same held-out views (the fixture's, moved into the input camera's frame and downscaled), and
 neither has cameras.json or any 3D person data:
 
-- video only: people, 2D keypoints and masks from `glimpse ingest` (found and tracked at 480x360);
+- video only: people, 2D keypoints and masks from `glimpse ingest` (found and tracked at 480x360), and the stage-02
+  setting the ingest writes into its scenes (02_smpl_fit.weights.size_sigma);
 - given 2D: the fixture's 2D keypoints (noise 1.5 px at 320 px, 10% dropped) and true visible masks.
 
 Both run every stage with the default parameters (`make all`); the table gives stage 07's humans-only PSNR,
@@ -60,7 +61,8 @@ def compose(out: Path, frames_from: Path, people_from: Path, fixture: Path, name
     frames_scene, people_scene, truth = load_scene(frames_from), load_scene(people_from), load_scene(fixture)
     size = (frames_scene.width, frames_scene.height)
     scale = frames_scene.width / people_scene.width
-    writer = SceneWriter(out, name, frames_scene.fps, "static")
+    writer = SceneWriter(out, name, frames_scene.fps, "static",
+                         overrides=people_scene.overrides)  # the ingest's stage-02 setting comes with its people
     for fid in frames_scene.frame_ids:
         writer.frame(fid, read_rgb(frames_scene.frame_paths[fid]))
     for pid, person in people_scene.humans.items():

@@ -523,3 +523,30 @@ def test_the_scales_motion_test_samples_the_path_at_about_its_rate():
     assert motion_stride(torch.arange(24, dtype=F64) / 8.0, 8.0) == 1
     assert motion_stride(torch.tensor([0.0, 0.05, 0.1, 1.0], dtype=F64), 5.0) == 4  # the median step: 20 fps
     assert motion_stride(torch.zeros(1, dtype=F64), 8.0) == 1
+
+
+def test_the_size_prior_holds_a_2d_fit_to_the_templates_size_and_places_it_by_that(model, config, prior):
+    """A taller-than-average body seen in 2D: with the size prior off the fit takes the size its keypoints'
+    proportions say (exact keypoints here: near the truth); with it on, the body is held to the template's size
+    (within about size_sigma) and so stands nearer the camera, as far as a template-sized body making the same
+    pixels would."""
+    names = [str(n) for n in model.data.extras["shape_preset_names"]]
+    tall = np.asarray(model.data.extras["shape_preset_betas"], np.float64)[names.index("man")][:10]
+    truth = replace(_known_person(model, 10), betas=tall)
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    true_size = float(body.size_ratio(torch.as_tensor(tall)))
+    assert true_size > 1.04
+    Ks, Rs, ts, cam, pixels = _static_view(_posed_keypoints(body, truth).keypoints, [0.0, 1.5, -1.0],
+                                           [0.3, 1.0, 3.5])
+    track = Track(torch.arange(10), torch.arange(10, dtype=F64) / 10, pixels, torch.ones(10, 17, dtype=F64),
+                  Ks, Rs, ts)
+    sizes, depths = {}, {}
+    for sigma in (0.0, 0.01):
+        held = replace(config, weights=replace(config.weights, size_sigma=sigma))
+        outcome = _fit(model, held, prior, track, initial_state_2d(body, track, prior.mean))
+        sizes[sigma] = float(body.size_ratio(outcome.state.betas))
+        fitted = _posed_keypoints(body, _as_params(outcome, truth.frame_ids)).keypoints
+        depths[sigma] = float(((fitted @ Rs[0].T + ts[0])[..., 2].mean() / cam[..., 2].mean()))
+    assert sizes[0.0] > 1.03, sizes
+    assert abs(sizes[0.01] - 1.0) < 0.02, sizes
+    assert depths[0.01] == pytest.approx(depths[0.0] * sizes[0.01] / sizes[0.0], rel=0.03), (depths, sizes)

@@ -18,6 +18,7 @@ class FitWeights:
     pose_prior: float
     joint_limits: float
     shape_prior: float
+    size_sigma: float
     accel_sigma_m_s2: float
     speed_sigma_m_s: float
     turn_rate_sigma_deg_s: float

@@ -163,7 +163,8 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
             p.ground["parallax_factor"] = parallax[k][0] if np.isfinite(parallax[k][0]) else None
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor))
+            p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor),
+                                       keep_size=bool(np.isfinite(stated[k])))
             p.seconds += time.perf_counter() - started
         if np.isfinite(stated[k]):
             _report_stated_height(p, models, g, stated[k])
@@ -273,7 +274,7 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
                 factor = float(stated[k])
                 p.ground["factor"] = factor
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor)
+            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor, keep_size=factor != 1.0)
             p.seconds += time.perf_counter() - started
             if factor != 1.0:
                 _report_stated_height(p, models, g, factor)
@@ -313,9 +314,11 @@ def _feet(pending: PendingFit, soles_body: KeypointBody, centres: dict[int, np.n
 
 
 def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: GroundConfig, floor: Floor | None = None,
-           factor: float = 1.0) -> dict:
+           factor: float = 1.0, keep_size: bool = False) -> dict:
     """Refit ``pending`` moved by ``factor`` about each frame's camera centre onto ``floor``; without a floor,
-    with planted feet only (moved only where a stated height gives a factor)."""
+    with planted feet only (moved only where a stated height gives a factor). Otherwise the size prior
+    (02_smpl_fit.weights.size_sigma) still pulls towards the template's size, against the floor's factor: one
+    more cue, weighed in the same energy; ``keep_size`` (a person of stated height) holds the moved size."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None
@@ -326,8 +329,11 @@ def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: Ground
                  floor.camera_height)
     energy.floor = FloorContact(soles_body, torch.as_tensor(feet.contact, dtype=dtype), g.floor_sigma_m,
                                 g.skate_sigma_m_s, plane)
+    if keep_size:  # a stated height: the size prior holds the size it gave, not the template's
+        with torch.no_grad():
+            energy.size_target = float(energy.body.size_ratio(state.betas))
     stage = refit_on_floor(energy, state, pending.schedule, g.iterations, f"person {pending.person.pid}")
-    energy.floor = None
+    energy.floor, energy.size_target = None, 1.0
     outcome.state = state.detached()
     outcome.stages.append(stage)
     return stage

@@ -1,6 +1,7 @@
 """The fitting energy of one person over T frames (SMPLify-style, in the spirit of a log posterior):
 
-    E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + smoothness + speed
+    E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + size prior
+        + smoothness + speed
 
 - data: sum over confident keypoints of ``c * (rho^2 / sigma^2) * r^2 / (r^2 + rho^2)``, a Geman-McClure
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
@@ -21,6 +22,13 @@
   Accelerations are also divided by the body's size over the template's (``KeypointBody.size_ratio``):
   in one view a smaller body nearer the camera projects to the same pixels and accelerates less, so
   in metres the term would pull every 2D fit small and near.
+- size prior (2D tracks without a metric size, ``size_sigma`` above 0): per fitted frame,
+  ``(log(size / target) / size_sigma)^2``, size the body's over the template's (``KeypointBody.size_ratio``).
+  One view cannot tell a body's size from its distance; only its proportions hint at it, and a detector's
+  keypoints (its own idea of where a hip or a shoulder is) make the proportions say a body 5-10% too large,
+  in every frame alike: a body fitted 8% too large stands 8% too far. The target is the template's size
+  (1), also in the floor step, where the floor's placement factor pulls the other way and the energy weighs
+  the two; a person of stated height is held to the size that height gave (``FitEnergy.size_target``).
 - floor (only in stage 02's floor step, glimpse.fit.floor_fit): sole points of the contact frames
   on the people's common floor, ``(height / sigma_floor)^2``, and any sole point below it, the same
   (static camera only); contact points that slide between consecutive contact frames,
@@ -38,7 +46,7 @@ from torch import Tensor
 from glimpse.fit.config import FitWeights
 from glimpse.fit.ground import height_above_plane
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_energy
+from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_energy, size_energy
 
 HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
 MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
@@ -204,8 +212,16 @@ class FitEnergy:
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
         self.floor: FloorContact | None = None  # the common floor, set for the ground refit
+        self.size_target = 1.0  # the size (over the template's) the size prior pulls towards: a stated height's
         self.frames_independent = False  # True: only the per-frame terms (a batch of pose hypotheses)
         self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
+
+    @property
+    def size_unobserved(self) -> bool:
+        """Nothing but the proportions tells this track's body size: 2D keypoints without metric 3D ones whose
+        size is trusted (``relative3d_size: model``)."""
+        metric_size = self.track.relative3d is not None and self.weights.relative3d_size == "model"
+        return self.track.is_2d and not metric_size
 
     def posed(self, state: FitState):
         return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
@@ -274,6 +290,9 @@ class FitEnergy:
         terms = {name: weights[name] * value.sum() for name, value in self.frame_terms(state, out.keypoints).items()}
         if self.use_priors and not self.frames_independent:
             terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
+            if w.size_sigma > 0 and self.size_unobserved:
+                terms["size_prior"] = len(self.track.times_s) * size_energy(self.body.size_ratio(state.betas),
+                                                                            self.size_target, w.size_sigma)
             metres = out.joints / state.log_scale.exp()  # motion is judged in metres of body
             # ... and accelerations of a body the template's size: otherwise shrinking everyone towards the
             # camera, which 2D keypoints cannot see, would lower the smoothness term.

@@ -197,3 +197,9 @@ def joint_limits(dtype: torch.dtype = torch.float64) -> JointLimits:
 def shape_energy(betas: Tensor) -> Tensor:
     """[10] -> [] squared norm of the shape coefficients."""
     return betas.square().sum()
+
+
+def size_energy(size_ratio: Tensor, target: float, sigma: float) -> Tensor:
+    """[] ``(log(size_ratio / target) / sigma)^2``: a body's size (over the template's, [] tensor) held to
+    ``target`` with a relative standard deviation ``sigma``."""
+    return ((size_ratio / target).log() / sigma).square()

@@ -166,6 +166,9 @@ class Fitter:
         for rate in ("scale_motion_rate_hz", "pose_hypothesis_rate_hz"):
             if not getattr(c, rate) > 0:
                 raise GlimpseError(f"02_smpl_fit.{rate} must be above 0 (Hz), found {getattr(c, rate)}")
+        if not c.weights.size_sigma >= 0:
+            raise GlimpseError(f"02_smpl_fit.weights.size_sigma must be 0 (off) or more (relative), found "
+                               f"{c.weights.size_sigma}")
         if c.pose_hypotheses < 1:
             raise GlimpseError(f"02_smpl_fit.pose_hypotheses must be at least 1 (1: only the prior's mean), "
                                f"found {c.pose_hypotheses}")

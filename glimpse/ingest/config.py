@@ -60,6 +60,7 @@ class IngestConfig:
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
     keypoint_crop_shifts: list[float]
+    fit_size_sigma: float
     sides_consistent: bool
     sides_keep_weight: float
     appearance_bins: int

@@ -7,7 +7,8 @@ Three streaming passes (one frame in memory at a time, at the working size):
    people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
    labels go to a work folder;
 3. write: per person its masks and COCO-17 keypoints, the preview video and the tracks report
-   (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them).
+   (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
+   carry stage 02's size prior for a detector's keypoints (``fit_overrides``).
 
 The scene is staged beside SCENE_DIR and renamed into place only when complete and valid: a failed ingest
 leaves a previous scene there untouched. The tracking pass keeps its labels and, every ``checkpoint_frames``
@@ -166,6 +167,13 @@ def default_scene_dir(video: Path, out_root: Path) -> Path:
     return Path(out_root) / "scenes" / scene_name_of(video)
 
 
+def fit_overrides(config: IngestConfig) -> dict[str, dict]:
+    """The scene.yaml overrides an ingested scene carries: stage 02's size prior for a detector's keypoints."""
+    if not config.fit_size_sigma > 0:
+        return {}
+    return {"02_smpl_fit": {"weights": {"size_sigma": config.fit_size_sigma}}}
+
+
 def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     """Ingest ``video`` into ``scene_dir`` (see the module docstring); returns the tracks report."""
     video, scene_dir = Path(video), Path(scene_dir)
@@ -177,7 +185,8 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
              survey.info.width, survey.info.height, survey.fps, len(survey.chosen), survey.width, survey.height,
              survey.motion.motion)
     scene_dir.parent.mkdir(parents=True, exist_ok=True)
-    writer = SceneWriter(scene_dir, scene_name_of(video), survey.fps, "static" if survey.static else "moving")
+    writer = SceneWriter(scene_dir, scene_name_of(video), survey.fps, "static" if survey.static else "moving",
+                         overrides=fit_overrides(config))
     work = scene_dir.with_name(scene_dir.name + WORK_SUFFIX)
     tracker = Tracker(model, config, survey.plate, user_detector, user_pose)
     key = fingerprint(video, config)
