@@ -4,7 +4,8 @@ keypoints (BlazePose's world landmarks) the ingest writes beside them, against t
 Each scenario is rendered at the `hd` fixture size (960x720, 60 frames over 3 s), encoded to a video and
 ingested with the default parameters, as in bench/ingest.py. Stage 01 is left out: the fixture's own cameras
 are used, so that the table measures the fit alone. Each found person is matched to the true person whose
-visible masks it overlaps most, then every person is fitted (stage 02's defaults: one floor for everyone)
+visible masks it overlaps most, then every person is fitted (stage 02's defaults with the scene's overrides, as a
+run would: one floor for everyone, the size prior the ingest writes)
 three times: from the 2D keypoints only (02_smpl_fit.relative3d false), with the metric 3D keypoints and
 their size (relative3d_size: model), and with them up to one size factor per person (fitted).
 Per scene: mean per-joint error with no alignment and after one similarity per person's sequence, pelvis
@@ -33,7 +34,7 @@ from ingest import fixture_video, found_people, true_people  # noqa: E402  (benc
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
-from glimpse.config import config_from_mapping, load_pipeline_yaml  # noqa: E402
+from glimpse.config import config_from_mapping, load_pipeline_yaml, resolve_params  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
 from glimpse.fit.stage import Fitter, onto_viewing_rays  # noqa: E402
@@ -106,7 +107,7 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
     _, _, cameras = read_cameras_json(fixture / "cameras.json")
     centres = {fid: camera.centre for fid, camera in cameras.items()}
     metric = metric_keypoint_errors(model, scene_dir, truth_dir, ids, cameras)
-    raw = load_pipeline_yaml()["02_smpl_fit"]
+    raw = resolve_params(load_pipeline_yaml(), scene.overrides, [])["02_smpl_fit"]  # as a run of the scene
     rows = []
     people = [person for pid, person in sorted(scene.humans.items()) if pid in ids]
     for variant, relative3d, size in VARIANTS:

@@ -38,7 +38,7 @@ from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contac
                                 placement_factors, plane_weights, speed_across_view, standing_weights)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
-from glimpse.fit.objective import FitEnergy, FloorContact
+from glimpse.fit.objective import TEMPLATE_SIZE, FitEnergy, FloorContact
 from glimpse.scene import HumanInputs
 
 HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
@@ -274,7 +274,8 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
                 factor = float(stated[k])
                 p.ground["factor"] = factor
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor, keep_size=factor != 1.0)
+            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor,
+                                       keep_size=bool(np.isfinite(stated[k])) and not p.schedule.fit_scale)
             p.seconds += time.perf_counter() - started
             if factor != 1.0:
                 _report_stated_height(p, models, g, factor)
@@ -333,7 +334,7 @@ def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: Ground
         with torch.no_grad():
             energy.size_target = float(energy.body.size_ratio(state.betas))
     stage = refit_on_floor(energy, state, pending.schedule, g.iterations, f"person {pending.person.pid}")
-    energy.floor, energy.size_target = None, 1.0
+    energy.floor, energy.size_target = None, TEMPLATE_SIZE
     outcome.state = state.detached()
     outcome.stages.append(stage)
     return stage

@@ -49,6 +49,7 @@ from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_energy, size_energy
 
 HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
+TEMPLATE_SIZE = 1.0  # KeypointBody.size_ratio of the template (betas 0): what the size prior pulls towards
 MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
 
 
@@ -212,7 +213,7 @@ class FitEnergy:
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
         self.floor: FloorContact | None = None  # the common floor, set for the ground refit
-        self.size_target = 1.0  # the size (over the template's) the size prior pulls towards: a stated height's
+        self.size_target = TEMPLATE_SIZE  # what the size prior pulls towards: a stated height's size in its refit
         self.frames_independent = False  # True: only the per-frame terms (a batch of pose hypotheses)
         self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
 
@@ -220,7 +221,8 @@ class FitEnergy:
     def size_unobserved(self) -> bool:
         """Nothing but the proportions tells this track's body size: 2D keypoints without metric 3D ones whose
         size is trusted (``relative3d_size: model``)."""
-        metric_size = self.track.relative3d is not None and self.weights.relative3d_size == "model"
+        metric_size = (self.track.relative3d is not None and self.weights.relative3d_size == "model"
+                       and len(self.hips) == len(HIP_NAMES))  # as relative3d_per_frame uses them
         return self.track.is_2d and not metric_size
 
     def posed(self, state: FitState):

@@ -26,7 +26,7 @@ from glimpse.ingest.tracker import Track
 log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames")  # changing these keeps a checkpoint valid
+NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma")  # changing these keeps a checkpoint valid
 
 
 def fingerprint(video: Path, config: IngestConfig) -> str:

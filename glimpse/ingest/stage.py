@@ -169,7 +169,10 @@ def default_scene_dir(video: Path, out_root: Path) -> Path:
 
 def fit_overrides(config: IngestConfig) -> dict[str, dict]:
     """The scene.yaml overrides an ingested scene carries: stage 02's size prior for a detector's keypoints."""
-    if not config.fit_size_sigma > 0:
+    if not config.fit_size_sigma >= 0:
+        raise GlimpseError(f"ingest.fit_size_sigma must be 0 (write none) or more (relative), found "
+                           f"{config.fit_size_sigma}")
+    if config.fit_size_sigma == 0:
         return {}
     return {"02_smpl_fit": {"weights": {"size_sigma": config.fit_size_sigma}}}
 
