@@ -25,8 +25,8 @@
 - size prior (2D tracks without a metric size, ``size_sigma`` above 0): per fitted frame,
   ``(log(size / target) / size_sigma)^2``, size the body's over the template's (``KeypointBody.size_ratio``).
   One view cannot tell a body's size from its distance; only its proportions hint at it, and a detector's
-  keypoints (its own idea of where a hip or a shoulder is) make the proportions say a body 5-10% too large,
-  in every frame alike: a body fitted 8% too large stands 8% too far. The target is the template's size
+  keypoints (its own idea of where a hip or a shoulder is) make the proportions say a body 9-13% too large,
+  in every frame alike: a body fitted 10% too large stands 10% too far. The target is the template's size
   (1), also in the floor step, where the floor's placement factor pulls the other way and the energy weighs
   the two; a person of stated height is held to the size that height gave (``FitEnergy.size_target``).
 - floor (only in stage 02's floor step, glimpse.fit.floor_fit): sole points of the contact frames
