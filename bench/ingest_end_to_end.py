@@ -10,8 +10,9 @@ neither has cameras.json or any 3D person data:
   setting the ingest writes into its scenes (02_smpl_fit.weights.size_sigma);
 - given 2D: the fixture's 2D keypoints (noise 1.5 px at 320 px, 10% dropped) and true visible masks.
 
-Both run every stage with the default parameters and their scene.yaml overrides (`make all`); the table gives stage 07's humans-only PSNR,
-SSIM and LPIPS on the held-out views (GTU's protocol) and the difference. Takes about 20 minutes on 2 cores.
+Both run every stage with the default parameters and their scene.yaml overrides (`make all`); the table gives
+stage 07's humans-only PSNR, SSIM and LPIPS on the held-out views (GTU's protocol) and the difference. Takes
+about 20 minutes on 2 cores.
 
     python bench/ingest_end_to_end.py [--seed 0] [--work DIR]
 """

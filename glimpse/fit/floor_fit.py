@@ -270,12 +270,12 @@ def _plant_feet(pending: list[PendingFit], feet: list[_Feet], soles_bodies: list
         p.ground = {"contact_sole_points": int(f.contact.sum())}
         if p.mode == "keypoints2d":
             factor = 1.0
-            if np.isfinite(stated[k]) and not p.schedule.fit_scale:
+            scaled = bool(np.isfinite(stated[k])) and not p.schedule.fit_scale
+            if scaled:
                 factor = float(stated[k])
                 p.ground["factor"] = factor
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor,
-                                       keep_size=bool(np.isfinite(stated[k])) and not p.schedule.fit_scale)
+            p.ground["refit"] = _refit(p, f, soles_body, g, factor=factor, keep_size=scaled)
             p.seconds += time.perf_counter() - started
             if factor != 1.0:
                 _report_stated_height(p, models, g, factor)

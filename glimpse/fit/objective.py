@@ -218,11 +218,15 @@ class FitEnergy:
         self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
 
     @property
+    def uses_metric_3d(self) -> bool:
+        """The track carries metric 3D keypoints and the layout has the hips they are measured from."""
+        return self.track.relative3d is not None and len(self.hips) == len(HIP_NAMES)
+
+    @property
     def size_unobserved(self) -> bool:
         """Nothing but the proportions tells this track's body size: 2D keypoints without metric 3D ones whose
         size is trusted (``relative3d_size: model``)."""
-        metric_size = (self.track.relative3d is not None and self.weights.relative3d_size == "model"
-                       and len(self.hips) == len(HIP_NAMES))  # as relative3d_per_frame uses them
+        metric_size = self.uses_metric_3d and self.weights.relative3d_size == "model"
         return self.track.is_2d and not metric_size
 
     def posed(self, state: FitState):
@@ -254,7 +258,7 @@ class FitEnergy:
         """[T] the metric 3D term of posed keypoints [T, K, 3], or None when the track has no metric keypoints
         (or the layout no hips to measure them from)."""
         track, w = self.track, self.weights
-        if track.relative3d is None or len(self.hips) != len(HIP_NAMES):
+        if not self.uses_metric_3d:
             return None
         relative = relative3d_residual_m(keypoints, track, self.hips, state.log_scale.exp(), w.relative3d_size == "model")
         return data_energy(relative, track.relative3d_weight, w.relative3d_noise_m,

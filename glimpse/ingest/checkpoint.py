@@ -26,7 +26,8 @@ from glimpse.ingest.tracker import Track
 log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma")  # changing these keeps a checkpoint valid
+# changing these keeps a checkpoint valid (fit_size_sigma only goes into scene.yaml)
+NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma")
 
 
 def fingerprint(video: Path, config: IngestConfig) -> str:
