@@ -51,6 +51,9 @@ def make_setup(tmp_path: Path, scene: Path, out: Path) -> tuple[Path, Path, Path
     defaults = yaml.safe_load((REPO / "pipeline.yaml").read_text())
     for name in STAGE_NAMES:  # a test-only parameter in every stage's section (the test's own copy)
         defaults.setdefault(name, {})["knob"] = 1
+    # The CPU named, so that resolving `schedule_scale: auto` need not import torch to look for CUDA in every
+    # process (1.5 s each; these stages compute nothing). Schedules on "auto": tests/test_auto_schedule.py.
+    defaults["compute"]["device"] = "cpu"
     pipeline_yaml = tmp_path / "pipeline.yaml"
     pipeline_yaml.write_text(yaml.safe_dump(defaults))
     log = tmp_path / "ran.log"
