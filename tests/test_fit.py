@@ -20,7 +20,7 @@ from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
-                                      initial_state_2d, initial_state_3d, motion_stride)
+                                      initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
 from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
 from glimpse.fit.priors import (build_pose_prior, joint_limits, mirror_body_pose, motion_poses,
                                 representative_poses)
@@ -226,13 +226,14 @@ def _static_view(points, eye, target):
     return Ks, Rs, ts, cam, pixels
 
 
-def _fit(model, config, prior, track, initial, full_iterations: int = 60, pose_hypotheses=None):
+def _fit(model, config, prior, track, initial, full_iterations: int = 60, pose_hypotheses=None,
+         unseen_limbs_at_rest: bool = False):
     energy = FitEnergy(KeypointBody(model, keypoint_map("coco17", model.data)), track, prior, joint_limits(),
                        config.weights, config.max_interpolated_gap)
     schedule = FitSchedule(config.global_iterations, full_iterations, tuple(config.pose_prior_anneal),
                            tuple(config.robust_scale_anneal), False, config.scale_motion_rate_hz,
                            config.pose_hypothesis_iterations, config.pose_hypothesis_joint_speed_m_s,
-                           config.pose_hypothesis_rate_hz)
+                           config.pose_hypothesis_rate_hz, unseen_limbs_at_rest)
     return fit_track(energy, initial, schedule, "person test", pose_hypotheses)
 
 
@@ -550,3 +551,44 @@ def test_the_size_prior_holds_a_2d_fit_to_the_templates_size_and_places_it_by_th
     assert sizes[0.0] > 1.03, sizes
     assert abs(sizes[0.01] - 1.0) < 0.02, sizes
     assert depths[0.01] == pytest.approx(depths[0.0] * sizes[0.01] / sizes[0.0], rel=0.03), (depths, sizes)
+
+
+def test_the_limbs_no_keypoint_shows_are_found_per_frame():
+    """unseen_limb_rotations: the body_pose numbers of an arm or leg none of whose end keypoints is seen in a
+    frame, in that frame only."""
+    names = keypoint_map("coco17", BodyModel.from_file(FREE_BODY, dtype=F64).data).names
+    weight = torch.ones(3, 17, dtype=F64)
+    weight[1, [names.index("left_elbow"), names.index("left_wrist")]] = 0.0  # frame 1: the left arm unseen
+    weight[2, names.index("left_wrist")] = 0.0  # frame 2: its elbow still seen
+    unseen = unseen_limb_rotations(weight, names)
+    arm = [JOINT_NAMES.index(j) for j in ("left_collar", "left_shoulder", "left_elbow", "left_wrist", "left_hand")]
+    expected = torch.zeros(3, 69, dtype=torch.bool)
+    for joint in arm:
+        expected[1, 3 * (joint - 1):3 * joint] = True
+    assert torch.equal(unseen, expected)
+
+
+def test_an_arm_the_keypoints_never_show_is_not_raised_by_a_pose_hypothesis(model, config):
+    """A walker in profile whose far arm no keypoint shows (a detector's far side): a hypothesis started
+    with an arm raised (reach, wave) explains the seen keypoints as well, and nothing pulls the unseen arm
+    down again (without unseen_limbs_at_rest this walker's far arm ends overhead). With it the hypotheses
+    leave such a limb where the global stage put it (the prior's mean)."""
+    frames, fps = 24, 8.0
+    motion = builtin_motion("walk", frames, fps=fps)
+    yaw = np.radians(90.0)  # walking across the view, the left side away from the camera
+    turn = np.array([[np.cos(yaw), 0.0, np.sin(yaw)], [0.0, 1.0, 0.0], [-np.sin(yaw), 0.0, np.cos(yaw)]])
+    truth = BodyParams(np.arange(frames), np.zeros(10), np.tile([0.0, yaw, 0.0], (frames, 1)), motion.body_pose,
+                       motion.transl @ turn.T + [-0.6, 0.0, 3.0], 1.0, "free", np.zeros(frames, bool))
+    body = KeypointBody(model, keypoint_map("coco17", model.data))
+    Ks, Rs, ts, _, pixels = _static_view(_posed_keypoints(body, truth).keypoints, [0.0, 1.5, -1.0], [0.0, 1.0, 3.0])
+    weight = torch.ones(frames, 17, dtype=F64)
+    weight[:, [body.names.index("left_elbow"), body.names.index("left_wrist")]] = 0.0
+    track = Track(torch.arange(frames), torch.arange(frames, dtype=F64) / fps, pixels, weight, Ks, Rs, ts)
+    prior = build_pose_prior(config.pose_prior_motions, config.pose_prior_floor_deg, mixture=config.pose_prior_mixture)
+    spread = representative_poses(config.pose_prior_motions, config.pose_hypotheses)[1:]
+    hypotheses = torch.cat([prior.mean[None], torch.as_tensor(spread)])
+    outcome = _fit(model, config, prior, track, initial_state_2d(body, track, prior.mean), 60, hypotheses, True)
+    fitted = _as_params(outcome, truth.frame_ids)
+    joints = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl)
+    wrist, shoulder = JOINT_NAMES.index("left_wrist"), JOINT_NAMES.index("left_shoulder")
+    assert (joints[:, wrist, 1] < joints[:, shoulder, 1] - 0.3).all(), joints[:, wrist, 1] - joints[:, shoulder, 1]

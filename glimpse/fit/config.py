@@ -65,6 +65,7 @@ class FitConfig:
     pose_hypothesis_iterations: int
     pose_hypothesis_joint_speed_m_s: float
     pose_hypothesis_rate_hz: float
+    unseen_limbs_at_rest: bool
     global_iterations: int
     full_iterations: int
     pose_prior_anneal: list[float]

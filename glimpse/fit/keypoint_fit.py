@@ -14,7 +14,8 @@
 3. Pose hypotheses (2D): each frame started again from several poses spread over the prior's
    motions and minimised alone; per frame the hypothesis that explains it best without the body
    changing shape between frames is kept (a crouch whose thighs point at the camera is a saddle
-   of the 2D energy for a body started standing).
+   of the 2D energy for a body started standing). With ``unseen_limbs_at_rest`` a limb no keypoint
+   shows in a frame starts every hypothesis there at the global stage's pose.
 4. Full stage: everything, with the priors; the pose prior's weight annealed from strong to
    its final value (SMPLify) while the robust scale shrinks from wide (a limb far from its
    keypoints still feels them) to its final value (outliers count little), each step minimised
@@ -31,6 +32,7 @@ import torch
 from scipy.spatial.transform import Rotation
 from torch import Tensor
 
+from glimpse.body.model_file import NUM_JOINTS
 from glimpse.cameras.align import umeyama
 from glimpse.errors import GlimpseError
 from glimpse.fit.keypoint_body import KeypointBody
@@ -40,6 +42,12 @@ TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
 HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")  # tell which way a profile faces
 YAW_HYPOTHESES_DEG = (0.0, 90.0, 180.0, 270.0)  # 2D global stage: turns about the body's up axis tried
 LEFT_RIGHT_PAIRS = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"))
+# With unseen_limbs_at_rest, the limbs the pose hypotheses leave at the global stage's pose in frames where none of
+# their end keypoints is seen: (SMPL body joints 1-23 whose rotations they hold, the keypoints that see them).
+UNSEEN_LIMBS = (((13, 16, 18, 20, 22), ("left_elbow", "left_wrist")),
+                ((14, 17, 19, 21, 23), ("right_elbow", "right_wrist")),
+                ((1, 4, 7, 10), ("left_knee", "left_ankle", "left_heel", "left_big_toe", "left_small_toe")),
+                ((2, 5, 8, 11), ("right_knee", "right_ankle", "right_heel", "right_big_toe", "right_small_toe")))
 LBFGS_HISTORY = 20  # L-BFGS memory (pairs of updates); torch's default is 100, 20 is ample at this size
 
 
@@ -54,6 +62,7 @@ class FitSchedule:
     hypothesis_iterations: int = 0  # 2D: L-BFGS iterations of the pose-hypotheses stage (0: no such stage)
     hypothesis_joint_speed_m_s: float = 1.0  # 2D: changing hypothesis between frames costs joint speed / this
     hypothesis_rate_hz: float = 8.0  # 2D: ... with frames judged at least 1 / this apart (seconds)
+    unseen_limbs_at_rest: bool = False  # 2D: the hypotheses leave limbs no keypoint shows at the global stage's pose
 
 
 @dataclass
@@ -323,9 +332,12 @@ def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, sc
     A body started standing stays standing where a crouch's thighs point at the camera (the 2D energy has no
     slope there); started crouching, it finds the crouch."""
     track, frames, hypotheses = energy.track, len(energy.track.frame_ids), len(poses)
-    batch = FitState(state.betas.clone(), repeat_frames(state.global_orient, hypotheses),
-                     poses.repeat_interleave(frames, 0), repeat_frames(state.transl, hypotheses),
-                     state.log_scale.clone())
+    starts = poses.repeat_interleave(frames, 0)
+    if schedule.unseen_limbs_at_rest:
+        unseen = repeat_frames(unseen_limb_rotations(track.weight, energy.body.names), hypotheses)
+        starts = torch.where(unseen, repeat_frames(state.body_pose, hypotheses), starts)
+    batch = FitState(state.betas.clone(), repeat_frames(state.global_orient, hypotheses), starts,
+                     repeat_frames(state.transl, hypotheses), state.log_scale.clone())
     energy.track, energy.use_priors, energy.frames_independent = track.repeated(hypotheses), True, True
     energy.pose_prior_scale = schedule.pose_prior_anneal[-1]
     energy.robust_scale_factor = schedule.robust_scale_anneal[-1]
@@ -354,6 +366,22 @@ def _pose_hypotheses_stage(energy: FitEnergy, state: FitState, poses: Tensor, sc
                       batch.transl[rows].clone(), state.log_scale.clone())
     stage["hypothesis_frames"] = np.bincount(best.numpy(), minlength=hypotheses).tolist()
     return chosen, stage
+
+
+def unseen_limb_rotations(weight: Tensor, names: tuple[str, ...]) -> Tensor:
+    """[T, 69] bool: the body_pose numbers of each frame's limbs (UNSEEN_LIMBS) none of whose end keypoints
+    (those of the layout ``names``) has weight there (weight [T, K]). With ``unseen_limbs_at_rest`` the pose
+    hypotheses start them at the global stage's pose: started from an arm overhead, an arm no keypoint shows
+    stays overhead, as nothing in the energy pulls it down."""
+    unseen = torch.zeros(weight.shape[0], 3 * (NUM_JOINTS - 1), dtype=torch.bool)
+    for joints, keypoints in UNSEEN_LIMBS:
+        present = [names.index(k) for k in keypoints if k in names]
+        if not present:
+            continue
+        blind = (weight[:, present] <= 0).all(-1)
+        for joint in joints:
+            unseen[:, 3 * (joint - 1):3 * joint] |= blind[:, None]
+    return unseen
 
 
 def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: str) -> tuple[FitState, dict]:

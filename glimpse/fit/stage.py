@@ -175,7 +175,7 @@ class Fitter:
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
                                tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz,
                                c.pose_hypothesis_iterations, c.pose_hypothesis_joint_speed_m_s,
-                               c.pose_hypothesis_rate_hz)
+                               c.pose_hypothesis_rate_hz, c.unseen_limbs_at_rest)
         try:
             if not track.is_2d:
                 initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)

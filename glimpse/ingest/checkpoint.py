@@ -26,8 +26,8 @@ from glimpse.ingest.tracker import Track
 log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
-# changing these keeps a checkpoint valid (fit_size_sigma only goes into scene.yaml)
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma")
+# changing these keeps a checkpoint valid (the fit_* ones only go into scene.yaml)
+NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma", "fit_unseen_limbs_at_rest")
 
 
 def fingerprint(video: Path, config: IngestConfig) -> str:

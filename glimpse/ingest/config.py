@@ -61,6 +61,7 @@ class IngestConfig:
     keypoint_smoothing_frames: int
     keypoint_crop_shifts: list[float]
     fit_size_sigma: float
+    fit_unseen_limbs_at_rest: bool
     sides_consistent: bool
     sides_keep_weight: float
     appearance_bins: int

@@ -168,13 +168,17 @@ def default_scene_dir(video: Path, out_root: Path) -> Path:
 
 
 def fit_overrides(config: IngestConfig) -> dict[str, dict]:
-    """The scene.yaml overrides an ingested scene carries: stage 02's size prior for a detector's keypoints."""
+    """The scene.yaml overrides an ingested scene carries: stage 02's settings for a detector's keypoints (the size
+    prior, unseen limbs left at rest by the pose hypotheses)."""
     if not config.fit_size_sigma >= 0:
         raise GlimpseError(f"ingest.fit_size_sigma must be 0 (write none) or more (relative), found "
                            f"{config.fit_size_sigma}")
-    if config.fit_size_sigma == 0:
-        return {}
-    return {"02_smpl_fit": {"weights": {"size_sigma": config.fit_size_sigma}}}
+    fit: dict = {}
+    if config.fit_size_sigma > 0:
+        fit["weights"] = {"size_sigma": config.fit_size_sigma}
+    if config.fit_unseen_limbs_at_rest:
+        fit["unseen_limbs_at_rest"] = True
+    return {"02_smpl_fit": fit} if fit else {}
 
 
 def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
