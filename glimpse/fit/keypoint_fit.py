@@ -32,22 +32,25 @@ import torch
 from scipy.spatial.transform import Rotation
 from torch import Tensor
 
-from glimpse.body.model_file import NUM_JOINTS
+from glimpse.body.motion import SMPL_BODY_JOINTS
 from glimpse.cameras.align import umeyama
 from glimpse.errors import GlimpseError
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.objective import FitEnergy, FitState, Track, acceleration_energy, repeat_frames, speed_energy
+from glimpse.fit.priors import pose_indices
 
 TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
 HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")  # tell which way a profile faces
 YAW_HYPOTHESES_DEG = (0.0, 90.0, 180.0, 270.0)  # 2D global stage: turns about the body's up axis tried
 LEFT_RIGHT_PAIRS = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"))
 # With unseen_limbs_at_rest, the limbs the pose hypotheses leave at the global stage's pose in frames where none of
-# their end keypoints is seen: (SMPL body joints 1-23 whose rotations they hold, the keypoints that see them).
-UNSEEN_LIMBS = (((13, 16, 18, 20, 22), ("left_elbow", "left_wrist")),
-                ((14, 17, 19, 21, 23), ("right_elbow", "right_wrist")),
-                ((1, 4, 7, 10), ("left_knee", "left_ankle", "left_heel", "left_big_toe", "left_small_toe")),
-                ((2, 5, 8, 11), ("right_knee", "right_ankle", "right_heel", "right_big_toe", "right_small_toe")))
+# their end keypoints is seen: (the SMPL body joints whose rotations they hold, the keypoints that see them).
+UNSEEN_LIMBS = tuple(
+    ((f"{side}_collar", f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist", f"{side}_hand"),
+     (f"{side}_elbow", f"{side}_wrist")) for side in ("left", "right")) + tuple(
+    ((f"{side}_hip", f"{side}_knee", f"{side}_ankle", f"{side}_foot"),
+     (f"{side}_knee", f"{side}_ankle", f"{side}_heel", f"{side}_big_toe", f"{side}_small_toe"))
+    for side in ("left", "right"))
 LBFGS_HISTORY = 20  # L-BFGS memory (pairs of updates); torch's default is 100, 20 is ample at this size
 
 
@@ -373,14 +376,11 @@ def unseen_limb_rotations(weight: Tensor, names: tuple[str, ...]) -> Tensor:
     (those of the layout ``names``) has weight there (weight [T, K]). With ``unseen_limbs_at_rest`` the pose
     hypotheses start them at the global stage's pose: started from an arm overhead, an arm no keypoint shows
     stays overhead, as nothing in the energy pulls it down."""
-    unseen = torch.zeros(weight.shape[0], 3 * (NUM_JOINTS - 1), dtype=torch.bool)
+    unseen = torch.zeros(weight.shape[0], 3 * len(SMPL_BODY_JOINTS), dtype=torch.bool)
     for joints, keypoints in UNSEEN_LIMBS:
         present = [names.index(k) for k in keypoints if k in names]
-        if not present:
-            continue
-        blind = (weight[:, present] <= 0).all(-1)
-        for joint in joints:
-            unseen[:, 3 * (joint - 1):3 * joint] |= blind[:, None]
+        if present:
+            unseen[:, pose_indices(joints)] |= (weight[:, present] <= 0).all(-1, keepdim=True)
     return unseen
 
 
