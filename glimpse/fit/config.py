@@ -37,6 +37,11 @@ class GroundConfig:
     normal_prior_m: float
     moving_normal_prior_m: float
     standing_thigh_deg: float
+    up_from: Literal["torso_axes", "bodies"]
+    torso_axis_sigma_deg: float
+    torso_up_sigma_deg: float
+    torso_keypoint_noise_px: float
+    torso_min_confidence: float
     floor_sigma_m: float
     skate_sigma_m_s: float
     shape_ridge: float
@@ -44,6 +49,11 @@ class GroundConfig:
     parallax_max_error: float
     parallax_size_error: float
     person_heights_m: list[str]
+    statures_on_floor: bool
+    stature_adult_sigma: float
+    stature_child_m: float
+    stature_child_sigma: float
+    stature_child_share: float
     iterations: int
 
 

@@ -3,10 +3,12 @@ on one floor (glimpse.fit.ground) and refitted with their feet on it.
 
 1. Each person's sole points (heels, big toes) over its fitted frames; contacts are the sole
    points that stay put across the view and are the body's lowest.
-2. The floor's normal from all contacts (each person's centred on its own), the people's mean
-   up where the contacts do not tell; each person's own contact plane along it.
+2. The floor's normal from all contacts (each person's centred on its own), where the contacts do not
+   tell the up from the people's 2D torso axes (their vertical vanishing point) and their bodies' mean up;
+   each person's own contact plane along it.
 3. Each 2D-fitted person is moved along the camera's rays and scaled (betas) by the factor that
-   puts its contact plane on the common floor, then refitted with the floor term on
+   puts its contact plane on the common floor (people whose size the keypoints do not tell: their common
+   size from a stature prior, each keeping the size the floor gives it), then refitted with the floor term on
    (glimpse.fit.objective.FloorContact: contacts on the floor, nothing below it, no sliding).
 
 Steps 2 and 3 only in a metric frame: a person moved in each frame along that frame's rays, about
@@ -35,7 +37,9 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig, GroundConfig, stated_person_heights
 from glimpse.fit.ground import (SOLE_LANDMARKS, Floor, floor_normal, foot_contacts, implausible_factors,
                                 lowest_points, near_own_plane, parallax_factor, person_camera_heights,
-                                placement_factors, plane_weights, speed_across_view, standing_weights)
+                                placement_factors, plane_weights, speed_across_view, standing_weights,
+                                stature_scale, torso_axis_planes, torso_axis_sigmas,
+                                vertical_from_torsos)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, refit_on_floor, rescale_about
 from glimpse.fit.objective import TEMPLATE_SIZE, FitEnergy, FloorContact
@@ -44,7 +48,10 @@ from glimpse.scene import HumanInputs
 HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
 ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
 STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
+TORSO_KEYPOINTS = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")  # a 2D torso axis: hips to shoulders
+TORSO_ITERATIONS = 20  # reweighting rounds of the torso axes' robust fit (converged well before)
 PARALLAX_RUN_GAP_FRAMES = 1  # a planted foot's run is consecutive scene frames: a missing one may hide a step
+STATURE_SEARCH_LOG, STATURE_SEARCH_STEP = 0.7, 0.001  # the common size is searched within exp(+-0.7), 0.1% steps
 
 
 @dataclass
@@ -120,6 +127,9 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     if np.linalg.norm(up_hint) <= 0:
         return {"applied": False, "reason": "nobody stands upright in any frame (no up to start the floor from)"}
     up_hint = up_hint / np.linalg.norm(up_hint)
+    bodies_up = up_hint
+    if g.up_from == "torso_axes":
+        up_hint = _torso_vertical(pending, feet, up_hint, g)
     grounded = [lowest_points(f.soles, up_hint) for f in feet]
     normal_prior_m = g.normal_prior_m if static else g.moving_normal_prior_m
     normal = floor_normal(grounded, up_hint, normal_prior_m)
@@ -148,6 +158,12 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     camera_height, factors = placement_factors(heights, anchored, trust, measured, measured_weights)
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
+    floor_sizes = g.statures_on_floor and any(_size_unobserved(p) for p in pending)
+    by_statures = floor_sizes and not (anchored.any() or np.isfinite(stated).any() or
+                                       (measured is not None and bool(np.isfinite(measured).any())))
+    if by_statures:
+        common = _stature_prior_factor(pending, factors, models, g)
+        camera_height, factors = camera_height * common, factors * common
     implausible = [f"{pending[i].person.pid} ({factors[i]:.2f})"
                    for i in implausible_factors(factors, g.max_placement_factor)]
     if implausible:
@@ -163,15 +179,60 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
             p.ground["parallax_factor"] = parallax[k][0] if np.isfinite(parallax[k][0]) else None
         if p.mode == "keypoints2d":  # moved by its factor even without contacts (its lowest points placed it)
             started = time.perf_counter()
-            p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor),
-                                       keep_size=bool(np.isfinite(stated[k])))
+            keep_size = (floor_sizes and _size_unobserved(p)) or bool(np.isfinite(stated[k]))
+            p.ground["refit"] = _refit(p, f, soles_body, g, floor, float(factor), keep_size=keep_size)
             p.seconds += time.perf_counter() - started
         if np.isfinite(stated[k]):
             _report_stated_height(p, models, g, stated[k])
     return {"applied": True, "normal": normal.tolist(), "camera_centre": centre.tolist(),
-            "camera_height": camera_height, "camera_moves": not static,
-            "camera_height_from": _camera_height_from(pending, anchored, measured, stated),
+            "camera_height": camera_height, "camera_moves": not static, "up_from": g.up_from,
+            "up_from_bodies_deg": float(np.degrees(np.arccos(np.clip(bodies_up @ up_hint, -1.0, 1.0)))),
+            "camera_height_from": _camera_height_from(pending, anchored, measured, stated, by_statures),
             "factors": {p.person.pid: float(s) for p, s in zip(pending, factors)}}
+
+
+def _size_unobserved(pending: PendingFit) -> bool:
+    """A person fitted from 2D keypoints that do not tell its size, held by the size prior in its own fit
+    (weights.size_sigma above 0): on the common floor (``statures_on_floor``) it keeps the size the floor gives it."""
+    return pending.mode == "keypoints2d" and pending.energy.weights.size_sigma > 0 and pending.energy.size_unobserved
+
+
+def _stature_prior_factor(pending: list[PendingFit], factors: np.ndarray, models: BodyModels,
+                          g: GroundConfig) -> float:
+    """The factor that scales every 2D-fitted person's stature on the floor (fitted stature times ``factors`` [P])
+    to the most probable set under the stature prior (glimpse.fit.ground.stature_scale), adults about the body
+    model's template stature (what the size prior pulls towards)."""
+    statures = np.array([_fitted_height(p, models) * f if p.mode == "keypoints2d" else np.nan
+                         for p, f in zip(pending, factors)])
+    first = next(p for p in pending if p.mode == "keypoints2d")
+    model = models[first.person.pid]
+    with torch.no_grad():
+        template = float(model.stature(torch.zeros(first.outcome.state.betas.shape[-1], dtype=model.dtype)))
+    return stature_scale(statures, template, g.stature_adult_sigma, g.stature_child_m, g.stature_child_sigma,
+                         g.stature_child_share, STATURE_SEARCH_LOG, STATURE_SEARCH_STEP)
+
+
+def _torso_vertical(pending: list[PendingFit], feet: list[_Feet], up_hint: np.ndarray, g: GroundConfig) -> np.ndarray:
+    """The world's up from where the 2D-fitted people's torso axes meet (glimpse.fit.ground.vertical_from_torsos),
+    over their upright frames (``standing`` weights) whose hips and shoulders are all at least
+    ``torso_min_confidence``; ``up_hint`` (the bodies' mean up) where they do not tell. The fitted bodies lean
+    with the camera's pitch on a detector's keypoints (docs/fitting.md); a 2D axis does not."""
+    planes, sigmas, weights = [], [], []
+    for p, f in zip(pending, feet):
+        if p.mode != "keypoints2d" or not set(TORSO_KEYPOINTS) <= set(p.energy.body.names):
+            continue
+        track, names = p.energy.track, list(p.energy.body.names)
+        hips, shoulders = ([names.index(n) for n in pair] for pair in (TORSO_KEYPOINTS[:2], TORSO_KEYPOINTS[2:]))
+        points, confidence = track.points.numpy(), track.weight.numpy()
+        seen = confidence[:, hips + shoulders].min(1) >= g.torso_min_confidence
+        planes.append(torso_axis_planes(points[:, hips], points[:, shoulders], track.K.numpy(), track.R.numpy()))
+        sigmas.append(torso_axis_sigmas(points[:, hips], points[:, shoulders], np.radians(g.torso_axis_sigma_deg),
+                                        g.torso_keypoint_noise_px))
+        weights.append(f.standing * seen)
+    if not planes:
+        return up_hint
+    return vertical_from_torsos(np.concatenate(planes), np.concatenate(weights), up_hint, np.concatenate(sigmas),
+                                np.radians(g.torso_up_sigma_deg), TORSO_ITERATIONS)
 
 
 def _parallax(pending: PendingFit, feet: _Feet, rank: dict[int, int], config: FitConfig) -> tuple[float, float]:
@@ -215,7 +276,7 @@ def _report_stated_height(pending: PendingFit, models: BodyModels, g: GroundConf
 
 
 def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measured: np.ndarray | None,
-                        stated: np.ndarray) -> str:
+                        stated: np.ndarray, by_statures: bool) -> str:
     """What set the camera's height above the common floor, in words (ground.json)."""
     anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     if anchors:
@@ -227,6 +288,9 @@ def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measure
     if cued:
         return ("the parallax of planted feet as the camera moves (each person's factor that makes them stand "
                 "still), over: " + ", ".join(cued))
+    if by_statures:
+        return ("the people's statures as the floor gives them, scaled together to the most probable under the "
+                "stature prior (02_smpl_fit.ground.stature_*); each person keeps the size the floor gives it")
     return ("the geometric mean over the people (their fitted heights on average), each weighted by how flat its "
             "own ground points lie")
 
@@ -319,7 +383,8 @@ def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: Ground
     """Refit ``pending`` moved by ``factor`` about each frame's camera centre onto ``floor``; without a floor,
     with planted feet only (moved only where a stated height gives a factor). Otherwise the size prior
     (02_smpl_fit.weights.size_sigma) still pulls towards the template's size, against the floor's factor: one
-    more cue, weighed in the same energy; ``keep_size`` (a person of stated height) holds the moved size."""
+    more cue, weighed in the same energy; ``keep_size`` (a person of stated height, or one whose size the keypoints
+    do not tell when ``statures_on_floor``) holds the moved size."""
     energy, outcome = pending.energy, pending.outcome
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None

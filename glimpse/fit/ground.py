@@ -8,7 +8,9 @@ and are the body's lowest) lie on a plane parallel to the true floor at ``s_i`` 
 distance from the camera; the pooled contacts give the floor's normal and, person by person,
 the factor that brings everyone onto one plane. People placed metrically (3D keypoints,
 given bodies) fix the camera's height above that floor; without them the factors' geometric
-mean is kept at 1 (the fitted heights on average).
+mean is kept at 1 (the fitted heights on average), or a stature prior picks the most probable
+common size (``stature_scale``). Where the contacts do not tell the floor's tilt, the people's
+2D torso axes do: they meet at the vertical vanishing point (``vertical_from_torsos``).
 
 Pure functions on arrays (world units; the floor's normal points up, towards the camera).
 """
@@ -248,3 +250,64 @@ def parallax_factor(soles: np.ndarray, contact: np.ndarray, centres: np.ndarray,
         spread = travel[moved] * (cross[moved] / travel[moved] - slope)
         error = max(error, np.sqrt((spread**2).sum() * moved.sum() / (moved.sum() - 1)) / travel.sum())
     return float(-1.0 / slope), float(error / -slope)  # the factor's relative error is the slope's
+
+
+def torso_axis_planes(hips_px: np.ndarray, shoulders_px: np.ndarray, K: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """[T, 3] unit world normals of the planes through the camera centre and each frame's 2D torso axis
+    (hip midpoint to shoulder midpoint). hips_px, shoulders_px [T, 2, 2] pixels (left, right); K, R [T, 3, 3]
+    intrinsics and world-to-camera rotations. An upright torso lies in its plane, so the vertical does too:
+    the vertical vanishing point, which a camera looking down puts below the image, is where the axes meet."""
+    ones = np.ones((len(hips_px), 1))
+    inv_K = np.linalg.inv(K)
+    low = np.einsum("tij,tj->ti", inv_K, np.concatenate([hips_px.mean(1), ones], 1))
+    high = np.einsum("tij,tj->ti", inv_K, np.concatenate([shoulders_px.mean(1), ones], 1))
+    normals = np.einsum("tji,tj->ti", R, np.cross(low, high))  # camera -> world: R^T
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True).clip(min=1e-12)
+
+
+def vertical_from_torsos(planes: np.ndarray, weights: np.ndarray, up_hint: np.ndarray, sigmas_rad: np.ndarray,
+                         hint_sigma_rad: float, iterations: int) -> np.ndarray:
+    """The world's up from torso axis planes [N, 3] (torso_axis_planes) with weights [N] in [0, 1]: the unit n
+    minimising sum w rho((m . n) / sigma)  +  |n - (n . u) u|^2 / hint_sigma^2, rho Cauchy (a leaning or
+    bending torso is an outlier), sigma [N] each axis's uncertainty (radians), u = ``up_hint``. Directions the
+    planes do not tell (people all in one image column leave the camera's pitch open) stay with the hint."""
+    up = up_hint / np.linalg.norm(up_hint)
+    prior = (np.eye(3) - np.outer(up, up)) / hint_sigma_rad**2
+    normal = up
+    for _ in range(iterations):
+        robust = 1.0 / (1.0 + ((planes @ normal) / sigmas_rad) ** 2)
+        scatter = prior + (planes * (weights * robust / sigmas_rad**2)[:, None]).T @ planes
+        _, vectors = np.linalg.eigh(scatter)
+        normal = vectors[:, 0] if vectors[:, 0] @ up >= 0 else -vectors[:, 0]
+    return normal
+
+
+def torso_axis_sigmas(hips_px: np.ndarray, shoulders_px: np.ndarray, axis_sigma_rad: float,
+                      keypoint_noise_px: float) -> np.ndarray:
+    """[T] how far each frame's 2D torso axis (hips [T, 2, 2] to shoulders [T, 2, 2], pixels) may be off the
+    vertical, radians: ``axis_sigma_rad`` (the body's own lean) and the keypoints' noise over the axis's length
+    (each end a midpoint of two keypoints), in quadrature. A torso 10 px long in a small frame tells little."""
+    length = np.linalg.norm(shoulders_px.mean(1) - hips_px.mean(1), axis=-1).clip(min=1e-6)
+    return np.hypot(axis_sigma_rad, keypoint_noise_px / length)
+
+
+def stature_scale(statures_m: np.ndarray, adult_m: float, adult_sigma: float, child_m: float, child_sigma: float,
+                  child_share: float, search: float, step: float) -> float:
+    """The one factor c that makes the people's statures [P] (metres, nan where unknown) most probable under a
+    prior of two log-normal modes: adults around ``adult_m`` (relative spread ``adult_sigma``) and, with prior
+    probability ``child_share``, children around ``child_m`` (``child_sigma``). On one floor the people's statures
+    relative to one another are measured (their feet and heads in the image); only their common size is not: a
+    child beside an adult is then taken for a child rather than both for two mid-sized people. c is searched
+    in log steps of ``step`` within a factor exp(+-``search``)."""
+    known = np.isfinite(statures_m) & (statures_m > 0)
+    if not known.any():
+        return 1.0
+    logs = np.log(statures_m[known])
+    candidates = np.arange(-search, search + step / 2, step)
+    shifted = logs[None, :] + candidates[:, None]  # [C, P]
+
+    def mode(mean_m: float, sigma: float, share: float) -> np.ndarray:
+        return np.log(share / sigma) - 0.5 * ((shifted - np.log(mean_m)) / sigma) ** 2
+
+    log_p = np.logaddexp(mode(adult_m, adult_sigma, 1.0 - child_share), mode(child_m, child_sigma, child_share))
+    return float(np.exp(candidates[np.argmax(log_p.sum(1))]))

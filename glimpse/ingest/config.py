@@ -62,6 +62,7 @@ class IngestConfig:
     keypoint_crop_shifts: list[float]
     fit_size_sigma: float
     fit_unseen_limbs_at_rest: bool
+    fit_up_from_torsos: bool
     sides_consistent: bool
     sides_keep_weight: float
     appearance_bins: int

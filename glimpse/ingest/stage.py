@@ -8,7 +8,7 @@ Three streaming passes (one frame in memory at a time, at the working size):
    labels go to a work folder;
 3. write: per person its masks and COCO-17 keypoints, the preview video and the tracks report
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
-   carry stage 02's size prior for a detector's keypoints (``fit_overrides``).
+   carry stage 02's settings for a detector's keypoints (``fit_overrides``).
 
 The scene is staged beside SCENE_DIR and renamed into place only when complete and valid: a failed ingest
 leaves a previous scene there untouched. The tracking pass keeps its labels and, every ``checkpoint_frames``
@@ -169,7 +169,7 @@ def default_scene_dir(video: Path, out_root: Path) -> Path:
 
 def fit_overrides(config: IngestConfig) -> dict[str, dict]:
     """The scene.yaml overrides an ingested scene carries: stage 02's settings for a detector's keypoints (the size
-    prior, unseen limbs left at rest by the pose hypotheses)."""
+    prior, unseen limbs left at rest by the pose hypotheses, the floor's tilt from the torso axes)."""
     if not config.fit_size_sigma >= 0:
         raise GlimpseError(f"ingest.fit_size_sigma must be 0 (write none) or more (relative), found "
                            f"{config.fit_size_sigma}")
@@ -178,6 +178,8 @@ def fit_overrides(config: IngestConfig) -> dict[str, dict]:
         fit["weights"] = {"size_sigma": config.fit_size_sigma}
     if config.fit_unseen_limbs_at_rest:
         fit["unseen_limbs_at_rest"] = True
+    if config.fit_up_from_torsos:
+        fit["ground"] = {"up_from": "torso_axes"}
     return {"02_smpl_fit": fit} if fit else {}
 
 
