@@ -159,8 +159,8 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     if not np.isfinite(camera_height):
         return {"applied": False, "reason": "no person's feet were seen on the ground"}
     floor_sizes = g.statures_on_floor and any(_size_unobserved(p) for p in pending)
-    by_statures = floor_sizes and not (anchored.any() or np.isfinite(stated).any() or
-                                       (measured is not None and bool(np.isfinite(measured).any())))
+    # nothing metric: no anchors, and no measured heights (the parallax of planted feet, or stated heights)
+    by_statures = floor_sizes and not (anchored.any() or (measured is not None and bool(np.isfinite(measured).any())))
     if by_statures:
         common = _stature_prior_factor(pending, factors, models, g)
         camera_height, factors = camera_height * common, factors * common
@@ -194,7 +194,7 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
 def _size_unobserved(pending: PendingFit) -> bool:
     """A person fitted from 2D keypoints that do not tell its size, held by the size prior in its own fit
     (weights.size_sigma above 0): on the common floor (``statures_on_floor``) it keeps the size the floor gives it."""
-    return pending.mode == "keypoints2d" and pending.energy.weights.size_sigma > 0 and pending.energy.size_unobserved
+    return pending.mode == "keypoints2d" and pending.energy.holds_size
 
 
 def _stature_prior_factor(pending: list[PendingFit], factors: np.ndarray, models: BodyModels,

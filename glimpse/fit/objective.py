@@ -229,6 +229,11 @@ class FitEnergy:
         metric_size = self.uses_metric_3d and self.weights.relative3d_size == "model"
         return self.track.is_2d and not metric_size
 
+    @property
+    def holds_size(self) -> bool:
+        """The size prior is on for this track: its size is unobserved and ``size_sigma`` is above 0."""
+        return self.weights.size_sigma > 0 and self.size_unobserved
+
     def posed(self, state: FitState):
         return self.body(state.betas, state.global_orient, state.body_pose, state.transl, state.log_scale.exp())
 
@@ -296,7 +301,7 @@ class FitEnergy:
         terms = {name: weights[name] * value.sum() for name, value in self.frame_terms(state, out.keypoints).items()}
         if self.use_priors and not self.frames_independent:
             terms["shape_prior"] = w.shape_prior * shape_energy(state.betas)
-            if w.size_sigma > 0 and self.size_unobserved:
+            if self.holds_size:
                 terms["size_prior"] = len(self.track.times_s) * size_energy(self.body.size_ratio(state.betas),
                                                                             self.size_target, w.size_sigma)
             metres = out.joints / state.log_scale.exp()  # motion is judged in metres of body
