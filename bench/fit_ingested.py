@@ -6,13 +6,17 @@ ingested with the default parameters, as in bench/ingest.py. Stage 01 is left ou
 are used, so that the table measures the fit alone. Each found person is matched to the true person whose
 visible masks it overlaps most, then every person is fitted (stage 02's defaults with the scene's overrides, as a
 run would: one floor for everyone, the size prior the ingest writes)
-three times: from the 2D keypoints only (02_smpl_fit.relative3d false), with the metric 3D keypoints and
-their size (relative3d_size: model), and with them up to one size factor per person (fitted).
+three times (`--variants` picks): from the 2D keypoints only (2d: 02_smpl_fit.relative3d false), with the metric 3D
+keypoints and their size (3d-size: relative3d_size model), and with them up to one size factor per person
+(3d-fitted).
 Per scene: mean per-joint error with no alignment and after one similarity per person's sequence, pelvis
 distance errors, depth order agreement (glimpse.fit.evaluate), and how the metric 3D keypoints themselves
-compare with the true body's (turned onto each frame's viewing ray as stage 02 does).
+compare with the true body's (turned onto each frame's viewing ray as stage 02 does); then the common floor
+against the true one (glimpse.fit.evaluate.floor_errors: its tilt, split into the camera's pitch and roll, and
+the camera's height above it).
 
     python bench/fit_ingested.py [--scenarios demo,adult_child] [--seed 0] [--work DIR]
+                                 [--variants 2d,3d-size,3d-fitted] [--params "02_smpl_fit.key=value ..."]
 """
 
 from __future__ import annotations
@@ -34,9 +38,9 @@ from ingest import fixture_video, found_people, true_people  # noqa: E402  (benc
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
-from glimpse.config import config_from_mapping, load_pipeline_yaml, resolve_params  # noqa: E402
+from glimpse.config import config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import joint_errors, placement_errors  # noqa: E402
+from glimpse.fit.evaluate import floor_errors, joint_errors, placement_errors  # noqa: E402
 from glimpse.fit.stage import Fitter, onto_viewing_rays  # noqa: E402
 from glimpse.fixtures.scenes import FREE_BODY  # noqa: E402
 from glimpse.ingest.config import load_ingest_config  # noqa: E402
@@ -49,7 +53,10 @@ SIZE = "hd"
 SCENARIOS = ("demo", "adult_child", "lower_body_occluded", "crouch")
 THREADS = 2
 HIPS = (11, 12)  # COCO-17
-VARIANTS = (("no", False, "model"), ("its size", True, "model"), ("size fitted", True, "fitted"))  # metric 3D term
+# the metric 3D term: key -> (table label, 02_smpl_fit.relative3d, weights.relative3d_size)
+VARIANTS = {"2d": ("no", False, "model"), "3d-size": ("its size", True, "model"),
+            "3d-fitted": ("size fitted", True, "fitted")}
+TRUE_UP, TRUE_FLOOR_HEIGHT = np.array([0.0, 1.0, 0.0]), 0.0  # the fixtures' world: y up, the floor at y = 0
 
 
 def ingested_scene(scenario: str, seed: int, work: Path) -> tuple[Path, Path]:
@@ -99,7 +106,16 @@ def metric_keypoint_errors(model: BodyModel, scene: Path, truth_dir: Path, ids: 
     return {"relative3d_error_m": float(np.concatenate(errors).mean()), "relative3d_size_ratio": float(np.mean(ratios))}
 
 
-def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
+def floor_row(floor: dict, cameras: dict) -> dict:
+    """The common floor's errors (glimpse.fit.evaluate.floor_errors) in the first frame's camera; {} without one."""
+    if not floor.get("applied") or "normal" not in floor:
+        return {}
+    first = cameras[min(cameras)]
+    return floor_errors(np.array(floor["normal"]), floor["camera_height"], np.array(floor["camera_centre"]),
+                        first.R, TRUE_UP, TRUE_FLOOR_HEIGHT)
+
+
+def run(scenario: str, seed: int, work: Path, model: BodyModel, variants: list[str], params: str) -> list[dict]:
     fixture, scene_dir = ingested_scene(scenario, seed, work)
     truth_dir = fixture.with_name(fixture.name + ".groundtruth")
     ids = true_ids(fixture, scene_dir)
@@ -107,10 +123,10 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
     _, _, cameras = read_cameras_json(fixture / "cameras.json")
     centres = {fid: camera.centre for fid, camera in cameras.items()}
     metric = metric_keypoint_errors(model, scene_dir, truth_dir, ids, cameras)
-    raw = resolve_params(load_pipeline_yaml(), scene.overrides, [])["02_smpl_fit"]  # as a run of the scene
+    raw = resolve_params(load_pipeline_yaml(), scene.overrides, parse_cli_params(params))["02_smpl_fit"]  # as a run
     rows = []
     people = [person for pid, person in sorted(scene.humans.items()) if pid in ids]
-    for variant, relative3d, size in VARIANTS:
+    for variant, relative3d, size in (VARIANTS[key] for key in variants):
         weights = {**raw["weights"], "relative3d_size": size}
         config = config_from_mapping(FitConfig, {**raw, "overlay": False, "mode": "keypoints2d", "weights": weights,
                                                  "relative3d": relative3d}, "pipeline.yaml 02_smpl_fit")
@@ -120,11 +136,12 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel) -> list[dict]:
         fitted = {ids[fit.pid]: fit.params for fit in fits}
         truths = {pid: dict(np.load(truth_dir / f"{pid}_body.npz")) for pid in fitted}
         placement = placement_errors(model, fitted, truths, centres)
-        frames = sum(int((~params.interpolated).sum()) for params in fitted.values())
-        for pid, params in sorted(fitted.items()):
+        frames = sum(int((~fit.interpolated).sum()) for fit in fitted.values())
+        on_floor = floor_row(floor, cameras)
+        for pid, fit in sorted(fitted.items()):
             rows.append({"scenario": scenario, "person": pid, "variant": variant, "floor": floor["applied"],
                          "seconds_per_100_frames": 100 * seconds / frames, **placement, **metric,
-                         **joint_errors(model, params, truths[pid])})
+                         **joint_errors(model, fit, truths[pid]), "floor_errors": on_floor})
     return rows
 
 
@@ -133,12 +150,22 @@ def main() -> None:
     parser.add_argument("--scenarios", default=",".join(SCENARIOS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--work", type=Path, default=None, help="keeps fixtures, videos and ingests between runs")
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help=f"which fits, of {', '.join(VARIANTS)} (2D keypoints only; with the metric 3D keypoints "
+                             "at their size; with them up to a fitted size)")
+    parser.add_argument("--params", default="",
+                        help='stage-02 overrides, as make\'s PARAMS: "02_smpl_fit.key=value ..."')
     args = parser.parse_args()
+    variants = args.variants.split(",")
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        parser.error(f"--variants: unknown {', '.join(unknown)} (known: {', '.join(VARIANTS)})")
     torch.set_num_threads(THREADS)
     work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-fit-ingested-"))
     work.mkdir(parents=True, exist_ok=True)
     model = BodyModel.from_file(FREE_BODY, dtype=torch.float64)
-    rows = [row for name in args.scenarios.split(",") for row in run(name, args.seed, work, model)]
+    rows = [row for name in args.scenarios.split(",")
+            for row in run(name, args.seed, work, model, variants, args.params)]
     print(f"\nStage 02 on ingested fixture videos ({SIZE}, seed {args.seed}, the fixtures' cameras); cm\n")
     print("| scene | person | metric 3D | floor | as fitted | person-aligned | pelvis distances | depth order | "
           "metric 3D keypoints' error | their size / true | s per person per 100 frames |")
@@ -150,6 +177,16 @@ def main() -> None:
               f"{'-' if np.isnan(distance) else f'{100 * distance:.1f}'} | "
               f"{'-' if np.isnan(order) else f'{100 * order:.0f}%'} | {100 * r['relative3d_error_m']:.1f} | "
               f"{r['relative3d_size_ratio']:.2f} | {r['seconds_per_100_frames']:.0f} |")
+
+    print("\nThe common floor against the true one (degrees; the camera's height above it, cm; pitch: the fitted up "
+          "leaning towards the camera's view)\n")
+    print("| scene | metric 3D | tilt | pitch error | roll error | camera height error |")
+    print("|---|---|---|---|---|---|")
+    for r in {(r["scenario"], r["variant"]): r for r in rows}.values():
+        f = r["floor_errors"]
+        cells = (f"{f['tilt_deg']:.1f} | {f['pitch_error_deg']:+.1f} | {f['roll_error_deg']:+.1f} | "
+                 f"{100 * f['camera_height_error_m']:+.0f}") if f else "no floor | - | - | -"
+        print(f"| {r['scenario']} | {r['variant']} | {cells} |")
 
 
 if __name__ == "__main__":

@@ -133,3 +133,23 @@ def test_the_common_size_takes_the_taller_of_an_adult_and_a_child_for_the_adult(
     else:
         assert abs(np.sqrt(scaled.prod()) - 1.76) < 0.01
     assert np.isclose(stature_scale(np.array([np.nan, np.nan]), **STATURE_PRIOR), 1.0)
+
+
+def test_a_fitted_floors_errors_split_into_the_cameras_pitch_and_roll():
+    """glimpse.fit.evaluate.floor_errors against an up turned by known angles about the camera's own x axis (the
+    view tipping towards or away from the camera: pitch) and then about its viewing axis (roll)."""
+    from scipy.spatial.transform import Rotation
+
+    from glimpse.fit.evaluate import floor_errors
+
+    camera = _camera()
+    for pitch_deg, roll_deg in ((3.0, 0.0), (0.0, -2.0), (1.5, 4.0)):
+        in_camera = Rotation.from_euler("x", -pitch_deg, degrees=True)  # +pitch: the up leans towards the view
+        in_camera = Rotation.from_euler("z", roll_deg, degrees=True) * in_camera  # +roll: towards image right
+        turn = camera.R.T @ in_camera.as_matrix() @ camera.R  # the same turn in world axes
+        fitted = turn @ TRUE_UP
+        errors = floor_errors(fitted, 1.5, CAMERA_CENTRE, camera.R, TRUE_UP)
+        assert errors["tilt_deg"] == pytest.approx(_angle_deg(fitted, TRUE_UP), abs=1e-9)
+        assert errors["pitch_error_deg"] == pytest.approx(pitch_deg, abs=0.1)
+        assert errors["roll_error_deg"] == pytest.approx(roll_deg, abs=0.1)
+        assert errors["camera_height_error_m"] == pytest.approx(1.5 - CAMERA_CENTRE[1])

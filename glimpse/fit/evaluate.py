@@ -91,3 +91,29 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
         return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan")}
     return {"pelvis_distance_error_m": float(np.mean(distance_errors)),
             "depth_order_agreement": float(np.mean(agreements))}
+
+
+def floor_errors(normal: np.ndarray, camera_height: float, camera_centre: np.ndarray, R: np.ndarray,
+                 true_up: np.ndarray, true_floor_height: float = 0.0) -> dict[str, float]:
+    """How a fitted floor (stage 02's ground.json: unit ``normal`` [3], the camera centre [3] ``camera_height``
+    above it; world) compares with the true one (``true_up`` [3], the floor at ``true_floor_height`` along it):
+
+    - ``tilt_deg``: the angle between the two normals;
+    - ``pitch_error_deg``, ``roll_error_deg``: that angle split in the camera's axes (``R`` [3, 3]
+      world-to-camera, OpenCV: x right, y down, z forward): the fitted up leaning towards the camera's
+      viewing direction (pitch, what a camera looking down along one image column cannot tell) or sideways
+      (roll), fitted minus true, degrees;
+    - ``camera_height_error_m``: the fitted camera height minus the true one (world units).
+    """
+    def tilts(up: np.ndarray) -> tuple[float, float]:
+        up_cam = R @ (up / np.linalg.norm(up))  # in the camera's axes; a level camera sees it as (0, -1, 0)
+        return (float(np.degrees(np.arctan2(up_cam[2], -up_cam[1]))),
+                float(np.degrees(np.arctan2(up_cam[0], -up_cam[1]))))
+
+    normal = np.asarray(normal, float) / np.linalg.norm(normal)
+    true_up = np.asarray(true_up, float) / np.linalg.norm(true_up)
+    (pitch, roll), (true_pitch, true_roll) = tilts(normal), tilts(true_up)
+    true_height = float(np.asarray(camera_centre, float) @ true_up - true_floor_height)
+    return {"tilt_deg": float(np.degrees(np.arccos(np.clip(normal @ true_up, -1.0, 1.0)))),
+            "pitch_error_deg": pitch - true_pitch, "roll_error_deg": roll - true_roll,
+            "camera_height_error_m": float(camera_height) - true_height}
