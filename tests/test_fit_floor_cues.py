@@ -1,12 +1,15 @@
 """Two cues of the common floor (glimpse.fit.ground). The floor's tilt from where people's 2D torso axes meet
 (torso_axis_planes, vertical_from_torsos): recovered from upright torsos projected by a camera looking down,
 robust to bending ones, and left to the hint in the direction the axes do not tell. The people's common size
-from a stature prior (stature_scale): a child beside an adult is taken for a child."""
+from a stature prior (stature_scale): a child beside an adult is taken for a child. And how a fitted floor is scored
+(glimpse.fit.evaluate.floor_errors): its tilt split into the camera's pitch and roll."""
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from glimpse.cameras.model import PinholeCamera
+from glimpse.fit.evaluate import floor_errors
 from glimpse.fit.ground import stature_scale, torso_axis_planes, torso_axis_sigmas, vertical_from_torsos
 from glimpse.fixtures.scenes import intrinsics, look_at_pose
 
@@ -138,10 +141,6 @@ def test_the_common_size_takes_the_taller_of_an_adult_and_a_child_for_the_adult(
 def test_a_fitted_floors_errors_split_into_the_cameras_pitch_and_roll():
     """glimpse.fit.evaluate.floor_errors against an up turned by known angles about the camera's own x axis (the
     view tipping towards or away from the camera: pitch) and then about its viewing axis (roll)."""
-    from scipy.spatial.transform import Rotation
-
-    from glimpse.fit.evaluate import floor_errors
-
     camera = _camera()
     for pitch_deg, roll_deg in ((3.0, 0.0), (0.0, -2.0), (1.5, 4.0)):
         in_camera = Rotation.from_euler("x", -pitch_deg, degrees=True)  # +pitch: the up leans towards the view

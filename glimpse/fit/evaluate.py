@@ -101,7 +101,7 @@ def floor_errors(normal: np.ndarray, camera_height: float, camera_centre: np.nda
     - ``tilt_deg``: the angle between the two normals;
     - ``pitch_error_deg``, ``roll_error_deg``: that angle split in the camera's axes (``R`` [3, 3]
       world-to-camera, OpenCV: x right, y down, z forward): the fitted up leaning towards the camera's
-      viewing direction (pitch, what a camera looking down along one image column cannot tell) or sideways
+      viewing direction (pitch: what the torso axes of people in one image column cannot tell) or sideways
       (roll), fitted minus true, degrees;
     - ``camera_height_error_m``: the fitted camera height minus the true one (world units).
     """
