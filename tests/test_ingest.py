@@ -137,9 +137,10 @@ def test_ingest_writes_a_valid_scene_with_both_people(demo_video, ingested) -> N
     assert (scene.width, scene.height) == (truth.width, truth.height)
     assert scene.camera_motion == "static"
     # stage 02 is told these are a detector's keypoints (their proportions do not tell a body's size)
-    assert CONFIG.fit_size_sigma > 0
+    assert CONFIG.fit_size_sigma > 0 and CONFIG.fit_keypoint_noise_m > 0
     assert CONFIG.fit_unseen_limbs_at_rest and CONFIG.fit_up_from_torsos
-    assert scene.overrides == {"02_smpl_fit": {"weights": {"size_sigma": CONFIG.fit_size_sigma},
+    assert scene.overrides == {"02_smpl_fit": {"weights": {"size_sigma": CONFIG.fit_size_sigma,
+                                                           "keypoint_noise_m": CONFIG.fit_keypoint_noise_m},
                                                "unseen_limbs_at_rest": True, "ground": {"up_from": "torso_axes"}}}
     assert sorted(scene.humans) == ["p0", "p1"]
     for person in scene.humans.values():

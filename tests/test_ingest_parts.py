@@ -595,3 +595,19 @@ def test_the_written_keypoints_are_the_median_over_crops_moved_sideways() -> Non
     model.regions.clear()  # no mirrors: 3 runs, 1 of them off, still give the truth (their mean would not)
     one_run = replace(own_runs, run_points=truth[None])
     np.testing.assert_allclose(model.median_points(image, one_run, (0.05,), True, False), truth, atol=1e-9)
+
+
+def test_the_fit_settings_an_ingest_writes_and_the_zeros_that_write_none() -> None:
+    from dataclasses import replace
+
+    from glimpse.errors import GlimpseError
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.stage import fit_overrides
+
+    config = replace(load_ingest_config(), fit_size_sigma=0.02, fit_keypoint_noise_m=0.04)
+    assert fit_overrides(config)["02_smpl_fit"]["weights"] == {"size_sigma": 0.02, "keypoint_noise_m": 0.04}
+    assert "weights" not in fit_overrides(replace(config, fit_size_sigma=0.0, fit_keypoint_noise_m=0.0))["02_smpl_fit"]
+    assert fit_overrides(replace(config, fit_size_sigma=0.0))["02_smpl_fit"]["weights"] == {"keypoint_noise_m": 0.04}
+    with pytest.raises(GlimpseError, match=r"ingest.fit_keypoint_noise_m must be 0 \(write none\) or more \(metres\), "
+                                           r"found -0.01"):
+        fit_overrides(replace(config, fit_keypoint_noise_m=-0.01))

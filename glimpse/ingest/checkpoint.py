@@ -27,8 +27,8 @@ log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
 # changing these keeps a checkpoint valid (the fit_* ones only go into scene.yaml)
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma", "fit_unseen_limbs_at_rest",
-                           "fit_up_from_torsos")
+NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma", "fit_keypoint_noise_m",
+                           "fit_unseen_limbs_at_rest", "fit_up_from_torsos")
 
 
 def fingerprint(video: Path, config: IngestConfig) -> str:

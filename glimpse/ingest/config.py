@@ -61,6 +61,7 @@ class IngestConfig:
     keypoint_smoothing_frames: int
     keypoint_crop_shifts: list[float]
     fit_size_sigma: float
+    fit_keypoint_noise_m: float
     fit_unseen_limbs_at_rest: bool
     fit_up_from_torsos: bool
     sides_consistent: bool

@@ -169,13 +169,16 @@ def default_scene_dir(video: Path, out_root: Path) -> Path:
 
 def fit_overrides(config: IngestConfig) -> dict[str, dict]:
     """The scene.yaml overrides an ingested scene carries: stage 02's settings for a detector's keypoints (the size
-    prior, unseen limbs left at rest by the pose hypotheses, the floor's tilt from the torso axes)."""
-    if not config.fit_size_sigma >= 0:
-        raise GlimpseError(f"ingest.fit_size_sigma must be 0 (write none) or more (relative), found "
-                           f"{config.fit_size_sigma}")
+    prior, the keypoints' noise, unseen limbs left at rest by the pose hypotheses, the floor's tilt from the torso
+    axes)."""
+    for name, unit in (("fit_size_sigma", "relative"), ("fit_keypoint_noise_m", "metres")):
+        if not getattr(config, name) >= 0:
+            raise GlimpseError(f"ingest.{name} must be 0 (write none) or more ({unit}), found {getattr(config, name)}")
     fit: dict = {}
-    if config.fit_size_sigma > 0:
-        fit["weights"] = {"size_sigma": config.fit_size_sigma}
+    weights = {key: value for key, value in (("size_sigma", config.fit_size_sigma),
+                                             ("keypoint_noise_m", config.fit_keypoint_noise_m)) if value > 0}
+    if weights:
+        fit["weights"] = weights
     if config.fit_unseen_limbs_at_rest:
         fit["unseen_limbs_at_rest"] = True
     if config.fit_up_from_torsos:
