@@ -327,7 +327,7 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     from glimpse.ingest.tracker import Track
 
     config = load_ingest_config()
-    survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480)
+    survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480, fps=10.0)
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
 
     def track(index: int, frames: int, height: float) -> Track:
@@ -611,3 +611,29 @@ def test_the_fit_settings_an_ingest_writes_and_the_zeros_that_write_none() -> No
     with pytest.raises(GlimpseError, match=r"ingest.fit_keypoint_noise_m must be 0 \(write none\) or more \(metres\), "
                                            r"found -0.01"):
         fit_overrides(replace(config, fit_keypoint_noise_m=-0.01))
+
+
+def test_a_skeleton_squeezed_into_a_person_cut_by_the_border_is_found() -> None:
+    from glimpse.ingest.truncation import squeezed_at_border, torso_lengths
+
+    frames = 12
+    times = np.arange(frames) / 10.0  # 10 fps
+    keypoints = np.zeros((frames, 17, 3))
+    keypoints[..., 2] = 0.9
+    centre_x = np.linspace(600.0, 300.0, frames)  # walking left, entering from the right edge of a 640x480 frame
+    torso = np.full(frames, 60.0)
+    torso[0] = 42.0  # squeezed at the border (30% short)
+    torso[8] = 45.0  # as short, far from any border: a bend, not a cut
+    keypoints[:, [5, 6], 0], keypoints[:, [11, 12], 0] = centre_x[:, None], centre_x[:, None]
+    keypoints[:, [5, 6], 1] = 200.0
+    keypoints[:, [11, 12], 1] = 200.0 + torso[:, None]
+    np.testing.assert_allclose(torso_lengths(keypoints), torso)
+    boxes = np.stack([centre_x - 30, np.full(frames, 150.0), centre_x + 30, np.full(frames, 400.0)], 1)
+    boxes[:2, 2] = 639.0  # the first two frames touch the right edge
+    found = squeezed_at_border(times, keypoints, boxes, (640, 480), 0.05, 0.5, 0.15)
+    assert found.tolist() == [True] + [False] * (frames - 1)  # frame 1 touches the edge at full size: kept
+    # a frame whose torso is not found is not judged, and neither is one with no neighbour in the window
+    keypoints[0, 11, 2] = 0.0
+    assert not squeezed_at_border(times, keypoints, boxes, (640, 480), 0.05, 0.5, 0.15).any()
+    keypoints[0, 11, 2] = 0.9
+    assert not squeezed_at_border(times * 100, keypoints, boxes, (640, 480), 0.05, 0.5, 0.15).any()

@@ -31,6 +31,7 @@ class PersonTrack:
     reidentified: list[tuple[int, float]]
     jumps: list[int]
     sides_exchanged: list[int] = field(default_factory=list)  # frame ids whose left/right labels were exchanged
+    border_squeezed: list[int] = field(default_factory=list)  # frame ids whose keypoints were not written
 
 
 def person_colour(k: int) -> tuple[int, int, int]:
@@ -85,6 +86,7 @@ def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict
             "mean_confidence": float(confidence[confidence > 0].mean()) if (confidence > 0).any() else 0.0,
             "visible_keypoints": float((confidence > 0).mean()),
             "sides_exchanged": person.sides_exchanged,
+            "border_squeezed": person.border_squeezed,
             "suspected_switches": [{"frame": f, "why": "re-identified after a gap", "appearance_distance": round(d, 3)}
                                    for f, d in person.reidentified]
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],

@@ -42,6 +42,7 @@ from glimpse.ingest.report import (
 )
 from glimpse.ingest.sides import exchange_sides, sides_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
+from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
 from glimpse.ingest.tracker import Track, Tracker
@@ -104,6 +105,13 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
         if config.sides_consistent:
             exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
             keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
+        squeezed = np.zeros(len(track.frames), bool)
+        if config.border_squeeze_max > 0:
+            squeezed = squeezed_at_border(np.array(track.frames) / survey.fps, keypoints, np.stack(track.boxes),
+                                          (survey.track_width, survey.track_height), config.border_squeeze_margin,
+                                          config.border_squeeze_window_s, config.border_squeeze_max)
+            keypoints[squeezed, :, 2] = 0.0
+            relative3d[squeezed, :, 3] = 0.0
         keypoints = smooth_keypoints(np.array(track.frames), keypoints, config.keypoint_smoothing_frames)
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
@@ -111,7 +119,8 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
         relative3d = smooth_keypoints(np.array(track.frames), relative3d, config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps),
-                                  [f for f, e in zip(track.frames, exchange) if e]))
+                                  [f for f, e in zip(track.frames, exchange) if e],
+                                  [f for f, e in zip(track.frames, squeezed) if e]))
     return people, dropped
 
 
