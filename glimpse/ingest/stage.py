@@ -6,7 +6,9 @@ Three streaming passes (one frame in memory at a time, at the working size):
 2. track (glimpse.ingest.tracker): every chosen frame is written to the scene (at ``max_side``) and its
    people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
    labels go to a work folder;
-3. write: per person its masks and COCO-17 keypoints, the preview video and the tracks report
+3. write: per person its masks and COCO-17 keypoints (left and right made consistent along the track, frames
+   squeezed at the border left out: glimpse.ingest.sides, glimpse.ingest.truncation), the preview video and the
+   tracks report
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
    carry stage 02's settings for a detector's keypoints (``fit_overrides``).
 
@@ -42,10 +44,10 @@ from glimpse.ingest.report import (
 )
 from glimpse.ingest.sides import exchange_sides, sides_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
-from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
 from glimpse.ingest.tracker import Track, Tracker
+from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
