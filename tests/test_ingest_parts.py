@@ -614,7 +614,8 @@ def test_the_fit_settings_an_ingest_writes_and_the_zeros_that_write_none() -> No
 
 
 def test_a_skeleton_squeezed_into_a_person_cut_by_the_border_is_found() -> None:
-    from glimpse.ingest.truncation import squeezed_at_border, torso_lengths
+    from glimpse.ingest.sides import torso_lengths
+    from glimpse.ingest.truncation import squeezed_at_border
 
     frames = 12
     times = np.arange(frames) / 10.0  # 10 fps

@@ -102,6 +102,7 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
     dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(kept)}
     people = []
     for k, track in enumerate(kept):
+        frames, track_boxes = np.array(track.frames), np.stack(track.boxes)  # boxes at the tracking size
         keypoints, relative3d = np.stack(track.keypoints), np.stack(track.relative3d)
         exchange = np.zeros(len(track.frames), bool)
         if config.sides_consistent:
@@ -109,16 +110,16 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
             keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
         squeezed = np.zeros(len(track.frames), bool)
         if config.border_squeeze_max > 0:
-            squeezed = squeezed_at_border(np.array(track.frames) / survey.fps, keypoints, np.stack(track.boxes),
+            squeezed = squeezed_at_border(frames / survey.fps, keypoints, track_boxes,
                                           (survey.track_width, survey.track_height), config.border_squeeze_margin,
                                           config.border_squeeze_window_s, config.border_squeeze_max)
             keypoints[squeezed, :, 2] = 0.0
             relative3d[squeezed, :, 3] = 0.0
-        keypoints = smooth_keypoints(np.array(track.frames), keypoints, config.keypoint_smoothing_frames)
+        keypoints = smooth_keypoints(frames, keypoints, config.keypoint_smoothing_frames)
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
-        boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
-        relative3d = smooth_keypoints(np.array(track.frames), relative3d, config.keypoint_smoothing_frames)
+        boxes = _to_scene_pixels(track_boxes.reshape(-1, 2, 2), survey).reshape(-1, 4)
+        relative3d = smooth_keypoints(frames, relative3d, config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps),
                                   [f for f, e in zip(track.frames, exchange) if e],

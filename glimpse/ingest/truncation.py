@@ -12,17 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# COCO-17 joints the torso length is measured between
-SHOULDERS, HIPS = (5, 6), (11, 12)
-
-
-def torso_lengths(keypoints: np.ndarray) -> np.ndarray:
-    """[T] pixels from the shoulders' midpoint to the hips' midpoint of keypoints [T, 17, 3] (x, y, confidence);
-    nan where one of the four joints is not found (confidence 0)."""
-    torso = list(SHOULDERS + HIPS)
-    found = (keypoints[:, torso, 2] > 0).all(1)
-    length = np.linalg.norm(keypoints[:, list(SHOULDERS), :2].mean(1) - keypoints[:, list(HIPS), :2].mean(1), axis=1)
-    return np.where(found, length, np.nan)
+from glimpse.ingest.sides import torso_lengths
 
 
 def squeezed_at_border(times_s: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray, image_size: tuple[int, int],
