@@ -341,7 +341,7 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     tall = track(0, config.track_min_frames, 0.5 * 480)
     small = track(1, 40, 0.5 * config.track_min_height * 480)  # a pattern on the floor, followed for long
     short = track(2, config.track_min_frames - 1, 0.5 * 480)
-    people, dropped = _kept_people([tall, small, short], survey, config)
+    people, dropped = _kept_people([tall, small, short], survey, config, lambda frame_id: np.zeros((480, 640), np.uint16))
     assert [p.label for p in people] == [1] and dropped == {"short": 1, "small": 1}
     report = tracks_report(people, dropped, {})
     assert report["dropped_short_tracks"] == 1 and report["dropped_small_tracks"] == 1
@@ -638,3 +638,36 @@ def test_a_skeleton_squeezed_into_a_person_cut_by_the_border_is_found() -> None:
     assert not squeezed_at_border(times, keypoints, boxes, (640, 480), 0.05, 0.5, 0.15).any()
     keypoints[0, 11, 2] = 0.9
     assert not squeezed_at_border(times * 100, keypoints, boxes, (640, 480), 0.05, 0.5, 0.15).any()
+
+
+def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
+    from types import SimpleNamespace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.occlusion import joints_on_others
+    from glimpse.ingest.stage import _kept_people
+    from glimpse.ingest.tracker import Track
+
+    labels = np.zeros((60, 80), np.uint16)
+    labels[10:30, 20:40] = 2  # a nearer person (track index 1) in front
+    labels[30:50, 20:40] = 1  # the person's own pixels
+    points = np.array([[25.0, 15.0], [25.0, 35.0], [5.0, 5.0], [39.4, 29.6], [-3.0, 15.0], [90.0, 15.0]])
+    assert joints_on_others(points, labels, 1).tolist() == [True, False, False, False, False, False]
+    assert joints_on_others(points, labels, 2).tolist() == [False, True, False, True, False, False]
+
+    config = load_ingest_config()
+    survey = SimpleNamespace(width=80, height=60, track_width=80, track_height=60, fps=10.0)
+    t = Track(0, _landmarks_at(np.zeros((BODY_LANDMARKS, 2)), Region(np.array([30.0, 30.0]), 40.0, 0.0)),
+              np.zeros((2, 4)))
+    t.frames = list(range(config.track_min_frames))
+    keypoints = np.ones((17, 3))
+    keypoints[:, :2] = [30.0, 40.0]  # on its own pixels
+    keypoints[3, :2] = [30.0, 20.0]  # behind the other person
+    t.keypoints = [keypoints.copy() for _ in t.frames]
+    t.relative3d = [np.ones((17, 4)) for _ in t.frames]
+    t.boxes = [np.array([20.0, 10.0, 40.0, 50.0]) for _ in t.frames]
+    people, _ = _kept_people([t], survey, config, lambda frame_id: labels)
+    confidence = people[0].keypoints[..., 2]
+    assert (confidence[:, 3] == 0).all() and (confidence[:, [0, 1, 2, 4]] > 0).all()
+    assert (people[0].relative3d[:, 3, 3] == 0).all()

@@ -69,6 +69,7 @@ class IngestConfig:
     border_squeeze_max: float
     border_squeeze_margin: float
     border_squeeze_window_s: float
+    hide_joints_on_others: bool
     appearance_bins: int
     appearance_update: float
     preview: bool

@@ -7,8 +7,8 @@ Three streaming passes (one frame in memory at a time, at the working size):
    people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
    labels go to a work folder;
 3. write: per person its masks and COCO-17 keypoints (left and right made consistent along the track, frames
-   squeezed at the border left out: glimpse.ingest.sides, glimpse.ingest.truncation), the preview video and the
-   tracks report
+   squeezed at the border and joints hidden behind others left out: glimpse.ingest.sides, glimpse.ingest.truncation,
+   glimpse.ingest.occlusion), the preview video and the tracks report
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
    carry stage 02's settings for a detector's keypoints (``fit_overrides``).
 
@@ -24,7 +24,7 @@ import logging
 import re
 import shutil
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -46,6 +46,7 @@ from glimpse.ingest.sides import exchange_sides, sides_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
+from glimpse.ingest.occlusion import joints_on_others
 from glimpse.ingest.tracker import Track, Tracker
 from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.io.images import frame_name
@@ -91,11 +92,14 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
-def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> tuple[list[PersonTrack], dict]:
+def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
+                 labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames whose box is usually (median over their frames) at
     least ``track_min_height`` of the frame's height, named p0, p1, ... in order of first appearance, their
-    keypoints' left and right made consistent along the track (glimpse.ingest.sides), smoothed over time and,
-    with their boxes, in scene pixels; and how many tracks were dropped, by reason."""
+    keypoints' left and right made consistent along the track (glimpse.ingest.sides), squeezed frames and joints
+    hidden behind others (on another person's pixels of ``labels_of(frame id)``, the tracking-size labels)
+    written as not seen, smoothed over time and, with their boxes, in scene pixels; and how many tracks were
+    dropped, by reason."""
     long_enough = [t for t in tracks if len(t.frames) >= config.track_min_frames]
     kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
                   key=lambda t: (t.frames[0], t.index))
@@ -115,6 +119,11 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig) -> t
                                           config.border_squeeze_window_s, config.border_squeeze_max)
             keypoints[squeezed, :, 2] = 0.0
             relative3d[squeezed, :, 3] = 0.0
+        if config.hide_joints_on_others:
+            hidden = np.stack([joints_on_others(points[:, :2], labels_of(frame_id), track.index + 1)
+                               for frame_id, points in zip(track.frames, keypoints)])
+            keypoints[..., 2][hidden] = 0.0
+            relative3d[..., 3][hidden] = 0.0
         keypoints = smooth_keypoints(frames, keypoints, config.keypoint_smoothing_frames)
         found = keypoints[..., 2:] > 0
         keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
@@ -261,7 +270,8 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
         if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
             save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)
     track_seconds = time.perf_counter() - track_started
-    people, dropped = _kept_people(tracker.tracks, survey, config)
+    people, dropped = _kept_people(tracker.tracks, survey, config,
+                                   lambda frame_id: cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED))
     if not people:
         raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
                            f"{config.track_min_frames} frames or more at {config.track_min_height:g} of the frame's "
