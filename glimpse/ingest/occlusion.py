@@ -3,8 +3,8 @@
 BlazePose's landmark model returns every landmark of the person in its crop, hidden or not, and its visibility
 score speaks mostly of self-occlusion: where a nearer person walks in front, the hidden person's landmarks are
 still given, guessed from the rest of the body, at high visibility (the `demo` video of seed 2: the far walker's
-keypoints 3.7-4.1 px off on average at 128 px while behind the near walker, about 1 px elsewhere). The ingest's depth-ordered labels say
-who is in front at each pixel, so a joint that lands on another person's pixels is hidden behind them; it is
+keypoints 3.7-4.1 px off on average at 128 px while behind the near walker, about 1 px elsewhere). The
+ingest's depth-ordered labels say who is in front at each pixel, so a joint that lands on another person's pixels is hidden behind them; it is
 written as not seen (confidence 0), as the scene format asks of hidden joints.
 """
 

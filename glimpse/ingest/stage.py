@@ -80,6 +80,11 @@ def _label_path(work: Path, frame_id: int) -> Path:
     return work / "labels" / f"{frame_name(frame_id)}.png"
 
 
+def _read_labels(work: Path, frame_id: int) -> np.ndarray:
+    """[H, W] uint16 at the tracking size: a frame's depth-ordered person labels from the work folder."""
+    return cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
+
+
 def _chosen_frames(path: Path, survey: Survey, desc: str) -> Iterator[tuple[int, np.ndarray]]:
     """(scene frame id, [H, W, 3] uint8 at the decoded size) of the survey's chosen frames, decoded again."""
     for index, rgb in iter_video_frames(path, survey.chosen, desc):
@@ -271,7 +276,7 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
             save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)
     track_seconds = time.perf_counter() - track_started
     people, dropped = _kept_people(tracker.tracks, survey, config,
-                                   lambda frame_id: cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED))
+                                   lambda frame_id: _read_labels(work, frame_id))
     if not people:
         raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
                            f"{config.track_min_frames} frames or more at {config.track_min_height:g} of the frame's "
@@ -283,11 +288,11 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
     for person in people:
         writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints, person.relative3d)
         for frame_id in person.frames:
-            labels = cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
+            labels = _read_labels(work, frame_id)
             writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
     if config.preview:
         frames = ((fid, resized(rgb, (survey.width, survey.height)),
-                   _scene_labels(cv2.imread(str(_label_path(work, fid)), cv2.IMREAD_UNCHANGED), people, survey))
+                   _scene_labels(_read_labels(work, fid), people, survey))
                   for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
         write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
                   survey.fps)
