@@ -217,6 +217,15 @@ def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
     np.testing.assert_allclose(paired[0, :2], [5, 5])  # unpaired landmarks untouched
 
 
+def test_a_mirrored_run_names_the_legs_otherwise_when_half_of_their_pairs_were_swapped() -> None:
+    from glimpse.ingest.blazepose import legs_named_otherwise
+
+    assert legs_named_otherwise([(25, 26), (27, 28)])  # knees and ankles: half of the four leg pairs
+    assert legs_named_otherwise([(11, 12), (25, 26), (27, 28), (29, 30), (31, 32)])
+    assert not legs_named_otherwise([(27, 28)])  # the ankles alone: a pair of close points, not the legs
+    assert not legs_named_otherwise([(11, 12), (13, 14), (15, 16)])  # shoulders and arms: not the legs
+
+
 def test_smoothing_keeps_straight_motion_removes_jitter_and_never_invents() -> None:
     from glimpse.ingest.smoothing import smooth_keypoints
 
@@ -327,7 +336,7 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     from glimpse.ingest.tracker import Track
 
     config = load_ingest_config()
-    survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480, fps=10.0)
+    survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480, fps=10.0, static=True)
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
 
     def track(index: int, frames: int, height: float) -> Track:
@@ -336,6 +345,7 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
         t.keypoints = [np.ones((17, 3))] * frames
         t.relative3d = [np.ones((17, 4))] * frames
         t.boxes = [np.array([10.0, 10.0, 30.0, 10.0 + height])] * frames
+        t.legs_disputed = [0.0] * frames
         return t
 
     tall = track(0, config.track_min_frames, 0.5 * 480)
@@ -583,18 +593,22 @@ def test_the_written_keypoints_are_the_median_over_crops_moved_sideways() -> Non
             wrong = raw.copy()
             wrong[25, :2] += 60.0 if len(self.regions) == 1 else 0.0
             runs = [(raw.ravel(), 1.0, None, None), (wrong.ravel(), 1.0, None, None)]
-            return runs if mirror else runs[1:]
+            return (runs, [len(self.regions) == 2]) if mirror else (runs[1:], [])
 
     model = Crops()
-    own_runs = replace(_landmarks_at(truth, region), run_points=np.stack([truth, truth]))
-    np.testing.assert_allclose(model.median_points(image, own_runs, (0.05,), True, True), truth, atol=1e-9)
+    own_runs = replace(_landmarks_at(truth, region), run_points=np.stack([truth, truth]), legs_disputed=1.0)
+    points, legs_disputed = model.median_points(image, own_runs, (0.05,), True, True)
+    np.testing.assert_allclose(points, truth, atol=1e-9)
+    assert legs_disputed == 2 / 3  # the region's own mirrored run and the second moved crop's, of three
     sideways = 0.05 * 240.0 * np.array([0.0, 1.0])
     np.testing.assert_allclose([r.centre for r in model.regions], [region.centre + sideways, region.centre - sideways],
                                atol=1e-9)
     assert all(r.side == region.side and r.angle == region.angle for r in model.regions)
     model.regions.clear()  # no mirrors: 3 runs, 1 of them off, still give the truth (their mean would not)
     one_run = replace(own_runs, run_points=truth[None])
-    np.testing.assert_allclose(model.median_points(image, one_run, (0.05,), True, False), truth, atol=1e-9)
+    points, legs_disputed = model.median_points(image, replace(one_run, legs_disputed=0.0), (0.05,), True, False)
+    np.testing.assert_allclose(points, truth, atol=1e-9)
+    assert legs_disputed == 0.0  # no mirrored run: nothing disputed
 
 
 def test_the_fit_settings_an_ingest_writes_and_the_zeros_that_write_none() -> None:
@@ -657,7 +671,7 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     assert joints_on_others(points, labels, 2).tolist() == [False, True, False, True, False, False]
 
     config = load_ingest_config()
-    survey = SimpleNamespace(width=80, height=60, track_width=80, track_height=60, fps=10.0)
+    survey = SimpleNamespace(width=80, height=60, track_width=80, track_height=60, fps=10.0, static=True)
     t = Track(0, _landmarks_at(np.zeros((BODY_LANDMARKS, 2)), Region(np.array([30.0, 30.0]), 40.0, 0.0)),
               np.zeros((2, 4)))
     t.frames = list(range(config.track_min_frames))
@@ -667,6 +681,7 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     t.keypoints = [keypoints.copy() for _ in t.frames]
     t.relative3d = [np.ones((17, 4)) for _ in t.frames]
     t.boxes = [np.array([20.0, 10.0, 40.0, 50.0]) for _ in t.frames]
+    t.legs_disputed = [0.0 for _ in t.frames]
     people, _ = _kept_people([t], survey, config, lambda frame_id: labels)
     confidence = people[0].keypoints[..., 2]
     assert (confidence[:, 3] == 0).all() and (confidence[:, [0, 1, 2, 4]] > 0).all()

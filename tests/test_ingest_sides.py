@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from glimpse.ingest.sides import COCO17_EXCHANGE, exchange_sides, mirrored_3d, sides_to_exchange, torso_lengths
+from glimpse.ingest.sides import (
+    COCO17_EXCHANGE,
+    exchange_legs,
+    exchange_sides,
+    legs_to_exchange,
+    mirrored_3d,
+    sides_to_exchange,
+    torso_lengths,
+)
 
 KEEP = 0.1  # pipeline.yaml's ingest.sides_keep_weight
+LEGS_KEEP, DISPUTE_SHARE = 0.5, 0.5  # pipeline.yaml's ingest.legs_keep_weight, legs_dispute_share
 
 # COCO-17 of an upright person facing the camera, image pixels (y down), torso 100 px: their left on the image's right
 FRONT = np.array([
@@ -90,3 +99,62 @@ def test_exchanging_sides_swaps_the_pairs_and_mirrors_the_depth_of_a_skeleton_it
     missing_nose = away.copy()
     missing_nose[0, 0, 3] = 0.0
     assert not mirrored_3d(missing_nose).any()
+
+
+def _side_on_walker(frames: int, phase: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """([T, 17, 3] keypoints, [T] bool) of a person walking right, seen side-on by a static camera at 10 fps:
+    hips 4 px a frame, each foot planted for 6 frames of a 10-frame stride and swinging 40 px in the other 4,
+    half a stride apart (``phase``: where the feet are in their stride at frame 0, so that they pass each other
+    between frames). The knees and ankles are named as a pose model with a habit names them: the front foot is
+    always "left"; the bool marks the frames where that is wrong (the right foot in front)."""
+    def foot(t: np.ndarray) -> np.ndarray:  # x of a foot whose stride starts at t = 0: planted, then swinging
+        stride, within = np.divmod(t, 10.0)
+        return 40.0 * stride + 40.0 * np.clip((within - 6.0) / 4.0, 0.0, 1.0)
+
+    t = np.arange(frames) + phase
+    left, right = foot(t), foot(t + 5.0) - 20.0
+    track = np.zeros((frames, 17, 3))
+    track[:, :, :2] = FRONT * [0.1, 1.0] + [300.0, 100.0]  # side-on: left and right a few pixels apart
+    track[:, :, 0] += 4.0 * t[:, None]
+    for (knee, ankle), x in (((13, 15), left), ((14, 16), right)):
+        track[:, ankle, 0] = 300.0 + x + 10.0
+        track[:, knee, 0] = (track[:, ankle, 0] + track[:, 11, 0]) / 2 + 5.0
+    wrong = right > left
+    track[wrong] = track[wrong][:, [*range(13), 14, 13, 16, 15]]
+    track[:, :, 2] = 0.9
+    return track, wrong
+
+
+def test_legs_named_by_habit_are_renamed_by_the_planted_foot_where_the_mirrored_runs_dispute_them() -> None:
+    keypoints, wrong = _side_on_walker(30)
+    assert 5 < wrong.sum() < 25 and not np.diff(keypoints[:, 15, 0]).min() < -30  # no jump gives it away
+    frames = np.arange(30)
+    disputed = np.ones(30)  # every mirrored run named the front foot "right": the names are a guess throughout
+    exchange = legs_to_exchange(frames, keypoints, disputed, LEGS_KEEP, DISPUTE_SHARE)
+    assert np.array_equal(exchange, wrong)
+    fixed, _ = exchange_legs(keypoints, np.zeros((30, 17, 4)), exchange)
+    truth, _ = _side_on_walker(30)
+    truth[wrong] = truth[wrong][:, [*range(13), 14, 13, 16, 15]]  # the walker as it is, named right
+    np.testing.assert_array_equal(fixed, truth)
+    # where the runs agree the names stand, guess or not; a frame disputed by fewer than half of them too
+    assert not legs_to_exchange(frames, keypoints, np.zeros(30), LEGS_KEEP, DISPUTE_SHARE).any()
+    assert not legs_to_exchange(frames, keypoints, np.full(30, 0.4), LEGS_KEEP, DISPUTE_SHARE).any()
+    # a gap in the frame ids or a missing ankle links nothing across it: each side of it is decided on its own
+    keypoints[10, 15, 2] = 0.0
+    assert np.array_equal(legs_to_exchange(frames, keypoints, disputed, LEGS_KEEP, DISPUTE_SHARE)[11:], wrong[11:])
+
+
+def test_legs_of_a_person_standing_still_keep_their_names() -> None:
+    keypoints = np.repeat(_track(1, exchanged=[])[:1], 8, axis=0)
+    assert not legs_to_exchange(np.arange(8), keypoints, np.ones(8), LEGS_KEEP, DISPUTE_SHARE).any()
+    assert legs_to_exchange(np.arange(0), keypoints[:0], np.ones(0), LEGS_KEEP, DISPUTE_SHARE).shape == (0,)
+
+
+def test_exchanging_legs_swaps_knees_and_ankles_only_in_the_frames_given() -> None:
+    keypoints = _track(3, exchanged=[])
+    relative3d = np.concatenate([np.random.default_rng(0).normal(size=(3, 17, 3)), np.ones((3, 17, 1))], 2)
+    legs_2d, legs_3d = exchange_legs(keypoints, relative3d, np.array([False, True, False]))
+    for values, out in ((keypoints, legs_2d), (relative3d, legs_3d)):
+        np.testing.assert_array_equal(out[[0, 2]], values[[0, 2]])
+        np.testing.assert_array_equal(out[1, :13], values[1, :13])
+        np.testing.assert_array_equal(out[1, [13, 14, 15, 16]], values[1, [14, 13, 16, 15]])

@@ -49,6 +49,8 @@ HEATMAP_MIN_CONFIDENCE = 0.5  # ... used when its peak probability reaches 0.5
 # Mirror pairs (left, right) of the 33 body landmarks; the auxiliary ones (33-38) lie on the body's midline.
 MIRROR_PAIRS = ((1, 4), (2, 5), (3, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16), (17, 18), (19, 20),
                 (21, 22), (23, 24), (25, 26), (27, 28), (29, 30), (31, 32))
+# The legs' mirror pairs: knees, ankles, heels, foot tips.
+LEG_PAIRS = ((25, 26), (27, 28), (29, 30), (31, 32))
 # BlazePose's 33 landmarks in COCO-17 order (nose, eyes, ears, shoulders, elbows, wrists, hips, knees, ankles).
 COCO17_FROM_BLAZEPOSE = (0, 2, 5, 7, 8, 11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28)
 
@@ -152,6 +154,7 @@ class PoseLandmarks:
     segmentation: np.ndarray  # [256, 256] probability that a crop pixel shows this person
     region: Region  # the region the landmarks were found in
     run_points: np.ndarray | None = None  # [R, 33, 2] image pixels of each run ``points`` averages (crop, mirror)
+    legs_disputed: float = 0.0  # share of the mirrored runs that named the legs the other way (legs_named_otherwise())
 
     def coco17(self) -> tuple[np.ndarray, np.ndarray]:
         """([17, 2] pixels, [17] confidence = visibility x presence) in COCO-17 order."""
@@ -242,6 +245,14 @@ def sides_to_swap(reference: np.ndarray, other: np.ndarray) -> list[tuple[int, i
     return pairs
 
 
+def legs_named_otherwise(swaps: list[tuple[int, int]]) -> bool:
+    """Whether a mirrored run named the legs the other way: at least half of :data:`LEG_PAIRS` among the pairs
+    :func:`sides_to_swap` found it exchanged. A side-on walker's legs look alike, and the model then tends to
+    give the front leg one side's name whichever it is; its mirrored run names it the other way. Where the two
+    disagree, the labels are a guess (glimpse.ingest.sides.legs_to_exchange)."""
+    return 2 * sum(pair in swaps for pair in LEG_PAIRS) >= len(LEG_PAIRS)
+
+
 def swap_sides(values: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
     """A copy of per-landmark ``values`` [N, C] with each (left, right) pair's rows exchanged."""
     out = values.copy()
@@ -298,43 +309,50 @@ class BlazePose:
         return raw, float(np.ravel(score)[0]), world, segmentation[..., 0]
 
     def _crop_runs(self, image: np.ndarray, region: Region, refine: bool, mirror: bool
-                   ) -> list[tuple[np.ndarray, float, np.ndarray, np.ndarray]]:
+                   ) -> tuple[list[tuple[np.ndarray, float, np.ndarray, np.ndarray]], list[bool]]:
         """The landmark model's (raw, score, world, segmentation) for ``region``'s crop and, with ``mirror``, for
         the mirrored crop, unmirrored and each left/right pair matched to the first run's (the model may call a
-        side-on person's left what its mirrored run calls right)."""
+        side-on person's left what its mirrored run calls right); and, per mirrored run, whether it named the
+        legs the other way (:func:`legs_named_otherwise`)."""
         crop = crop_image(image, region, LANDMARK_SIZE).astype(np.float32) / 255.0
-        runs = [self._landmark_outputs(crop, refine)]
+        runs, disputes = [self._landmark_outputs(crop, refine)], []
         if mirror:
             raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
             raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
             swaps = sides_to_swap(runs[0][0], raw_m)
+            disputes.append(legs_named_otherwise(swaps))
             raw_m = swap_sides(raw_m.reshape(-1, LANDMARK_VALUES), swaps).ravel()
             world_m = swap_sides(world_m.reshape(-1, 3), swaps).ravel()
             runs.append((raw_m, score_m, world_m, segmentation_m))
-        return runs
+        return runs, disputes
 
     def landmarks(self, image: np.ndarray, region: Region, refine: bool = True, mirror_average: bool = False
                   ) -> PoseLandmarks:
         """The person in ``region`` of ``image`` [H, W, 3] uint8. refine: MediaPipe's heatmap refinement;
         mirror_average: also run on the mirrored crop and average the two (test-time augmentation)."""
-        runs = self._crop_runs(image, region, refine, mirror_average)
+        runs, disputes = self._crop_runs(image, region, refine, mirror_average)
         raw, world = sum(r[0] for r in runs) / len(runs), sum(r[2].ravel() for r in runs) / len(runs)
         segmentation, score = sum(r[3] for r in runs) / len(runs), sum(r[1] for r in runs) / len(runs)
         return replace(decode_landmarks(raw, score, world, segmentation, region),
-                       run_points=np.stack([landmark_image_points(run[0], region)[:BODY_LANDMARKS] for run in runs]))
+                       run_points=np.stack([landmark_image_points(run[0], region)[:BODY_LANDMARKS] for run in runs]),
+                       legs_disputed=float(np.mean(disputes)) if disputes else 0.0)
 
     def median_points(self, image: np.ndarray, landmarks: PoseLandmarks, shifts: tuple[float, ...], refine: bool,
-                      mirror: bool) -> np.ndarray:
-        """[33, 2] image pixels: the per-coordinate median of ``landmarks``' runs and of the runs on its region
-        moved sideways (along the crop's x axis) by each of ``shifts`` (fractions of the side), both ways, each
-        with its mirror when ``mirror``; ``image`` is the one the landmarks were found in. A gross error of a few
-        crops (a knee put on the other leg) moves a median little, where it would move a mean."""
+                      mirror: bool) -> tuple[np.ndarray, float]:
+        """([33, 2] image pixels, legs disputed): the per-coordinate median of ``landmarks``' runs and of the runs
+        on its region moved sideways (along the crop's x axis) by each of ``shifts`` (fractions of the side), both
+        ways, each with its mirror when ``mirror``; and the share of all those mirrored runs that named the legs
+        the other way. ``image`` is the one the landmarks were found in. A gross error of a few crops (a knee put
+        on the other leg) moves a median little, where it would move a mean."""
         region = landmarks.region
         sideways = region.side * np.array([np.cos(region.angle), np.sin(region.angle)])
         points = list(landmarks.run_points if landmarks.run_points is not None else [landmarks.points])
+        mirrored = len(points) - 1
+        disputed = landmarks.legs_disputed * mirrored
         for shift in shifts:
             for sign in (1.0, -1.0):
                 moved = Region(region.centre + sign * shift * sideways, region.side, region.angle)
-                points += [landmark_image_points(run[0], moved)[:BODY_LANDMARKS]
-                           for run in self._crop_runs(image, moved, refine, mirror)]
-        return np.median(np.stack(points), axis=0)
+                runs, disputes = self._crop_runs(image, moved, refine, mirror)
+                points += [landmark_image_points(run[0], moved)[:BODY_LANDMARKS] for run in runs]
+                mirrored, disputed = mirrored + len(disputes), disputed + sum(disputes)
+        return np.median(np.stack(points), axis=0), disputed / mirrored if mirrored else 0.0

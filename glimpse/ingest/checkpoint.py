@@ -57,7 +57,8 @@ def _track_arrays(track: Track) -> dict[str, np.ndarray]:
         region=_region_values(landmarks.region), index=np.array(track.index), look=track.look,
         velocity=track.velocity, missing=np.array(track.missing), frames=np.array(track.frames, np.int64),
         keypoints=np.array(track.keypoints).reshape(-1, 17, 3), relative3d=np.array(track.relative3d).reshape(-1, 17, 4),
-        boxes=np.array(track.boxes).reshape(-1, 4), reidentified=np.array(track.reidentified, float).reshape(-1, 2),
+        boxes=np.array(track.boxes).reshape(-1, 4), legs_disputed=np.array(track.legs_disputed, float),
+        reidentified=np.array(track.reidentified, float).reshape(-1, 2),
         jumps=np.array(track.jumps, np.int64))
     return arrays
 
@@ -68,7 +69,7 @@ def _track_from(arrays: dict[str, np.ndarray]) -> Track:
     return Track(int(arrays["index"]), landmarks, arrays["look"], velocity=arrays["velocity"],
                  missing=int(arrays["missing"]), frames=[int(f) for f in arrays["frames"]],
                  keypoints=list(arrays["keypoints"]), relative3d=list(arrays["relative3d"]),
-                 boxes=list(arrays["boxes"]),
+                 boxes=list(arrays["boxes"]), legs_disputed=[float(d) for d in arrays["legs_disputed"]],
                  reidentified=[(int(f), float(d)) for f, d in arrays["reidentified"]],
                  jumps=[int(f) for f in arrays["jumps"]])
 

@@ -66,6 +66,9 @@ class IngestConfig:
     fit_up_from_torsos: bool
     sides_consistent: bool
     sides_keep_weight: float
+    legs_consistent: bool
+    legs_keep_weight: float
+    legs_dispute_share: float
     border_squeeze_max: float
     border_squeeze_margin: float
     border_squeeze_window_s: float

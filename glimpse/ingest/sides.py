@@ -20,6 +20,16 @@ which way the person faces: a model that is wrong for most of a track stays wron
 A frame's exchange applies to the 2D keypoints and to the model's metric 3D landmarks; in 3D the depth is also
 mirrored about the hips when the exchanged skeleton would otherwise be a mirror image of a body (its nose on
 the side its chest's normal points away from).
+
+**The legs alone.** A side-on walker's two legs look alike: the model tends to give the front leg one side's
+name whichever leg it is, so its labels change when the swinging foot passes the planted one, between two frames
+of a 10 fps video, without any jump (each leg's label then moves half a stride, as the two real feet do between
+them). Its run on the mirrored crop names the front leg the other way (glimpse.ingest.blazepose.
+legs_named_otherwise): where the two runs disagree, the legs' names are a guess. A second pass over the track
+(:func:`legs_to_exchange`, static camera only) then decides them by a **planted foot**: a walker has a foot on
+the ground, still in the image of a static camera, between every two frames; a frame pair costs the smaller of
+the two ankles' displacements under its labels. Exchanging a frame the runs agree on costs ``keep_weight``; one
+whose mirrored runs mostly disputed the names, nothing.
 """
 
 from __future__ import annotations
@@ -28,11 +38,16 @@ import numpy as np
 
 # COCO-17 left/right pairs: eyes, ears, shoulders, elbows, wrists, hips, knees, ankles
 COCO17_SIDE_PAIRS = ((1, 2), (3, 4), (5, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16))
+COCO17_LEG_PAIRS = ((13, 14), (15, 16))  # knees, ankles
+COCO17_ANKLES = (15, 16)
 COCO17_NOSE = 0
 SHOULDERS, HIPS = (5, 6), (11, 12)
 COCO17_EXCHANGE = np.arange(17)
+COCO17_LEG_EXCHANGE = np.arange(17)
 for _left, _right in COCO17_SIDE_PAIRS:
     COCO17_EXCHANGE[_left], COCO17_EXCHANGE[_right] = _right, _left
+for _left, _right in COCO17_LEG_PAIRS:
+    COCO17_LEG_EXCHANGE[_left], COCO17_LEG_EXCHANGE[_right] = _right, _left
 
 
 def torso_lengths(keypoints: np.ndarray) -> np.ndarray:
@@ -79,6 +94,52 @@ def sides_to_exchange(keypoints: np.ndarray, keep_weight: float) -> np.ndarray:
     for t in range(count - 1, 0, -1):
         states[t - 1] = back[t, states[t]]
     return states.astype(bool)
+
+
+def legs_to_exchange(frames: np.ndarray, keypoints: np.ndarray, disputed: np.ndarray, keep_weight: float,
+                     dispute_share: float) -> np.ndarray:
+    """frames [T] increasing frame ids and [T, 17, 3] COCO-17 keypoints of one track, disputed [T] the share of
+    the model's mirrored runs that named the legs the other way -> [T] bool: the frames whose knees and ankles
+    are to be exchanged (module docstring, "The legs alone"). Exchanging a frame costs nothing where at least
+    ``dispute_share`` of its mirrored runs disputed the names (the names then come from the model's habit, not
+    from the image: they turn with the crop), else ``keep_weight`` torso lengths; consecutive frames (ids one
+    apart) that hold both ankles cost the smaller of the ankles' displacements between them under their two
+    labels, in torso lengths. Ties keep the names."""
+    count = len(keypoints)
+    if count == 0:
+        return np.zeros(0, bool)
+    torso = torso_lengths(keypoints)
+    scale = np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
+    unary = np.stack([np.zeros(count), np.where(np.asarray(disputed) >= dispute_share, 0.0, keep_weight)], 1)
+    ankles, exchanged = list(COCO17_ANKLES), list(COCO17_ANKLES[::-1])
+    cost = unary[0].copy()
+    back = np.zeros((count, 2), int)
+    for t in range(1, count):
+        before, now = keypoints[t - 1], keypoints[t]
+        step = np.zeros((2, 2))  # [previous state, this state]
+        if frames[t] - frames[t - 1] == 1 and (before[ankles, 2] > 0).all() and (now[ankles, 2] > 0).all():
+            for previous, order_before in enumerate((ankles, exchanged)):
+                for state, order_now in enumerate((ankles, exchanged)):
+                    moved = np.linalg.norm(now[order_now, :2] - before[order_before, :2], axis=1)
+                    step[previous, state] = moved.min() / max(scale[t - 1], scale[t], 1e-6)
+        total = cost[:, None] + step
+        back[t] = np.argmin(total, axis=0)
+        cost = total[back[t], [0, 1]] + unary[t]
+    states = np.zeros(count, int)
+    states[-1] = int(np.argmin(cost))
+    for t in range(count - 1, 0, -1):
+        states[t - 1] = back[t, states[t]]
+    return states.astype(bool)
+
+
+def exchange_legs(keypoints: np.ndarray, relative3d: np.ndarray, exchange: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of [T, 17, 3] keypoints and [T, 17, 4] relative3d with the knees and the ankles exchanged in the
+    frames ``exchange`` [T] bool."""
+    keypoints, relative3d = keypoints.copy(), relative3d.copy()
+    keypoints[exchange] = keypoints[exchange][:, COCO17_LEG_EXCHANGE]
+    relative3d[exchange] = relative3d[exchange][:, COCO17_LEG_EXCHANGE]
+    return keypoints, relative3d
 
 
 def exchange_sides(keypoints: np.ndarray, relative3d: np.ndarray, exchange: np.ndarray

@@ -42,7 +42,7 @@ from glimpse.ingest.report import (
     report_table,
     tracks_report,
 )
-from glimpse.ingest.sides import exchange_sides, sides_to_exchange
+from glimpse.ingest.sides import exchange_legs, exchange_sides, legs_to_exchange, sides_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
@@ -101,10 +101,10 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                  labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames whose box is usually (median over their frames) at
     least ``track_min_height`` of the frame's height, named p0, p1, ... in order of first appearance, their
-    keypoints' left and right made consistent along the track (glimpse.ingest.sides), squeezed frames and joints
-    hidden behind others (on another person's pixels of ``labels_of(frame id)``, the tracking-size labels)
-    written as not seen, smoothed over time and, with their boxes, in scene pixels; and how many tracks were
-    dropped, by reason."""
+    keypoints' left and right (and their legs', on a static camera) made consistent along the track
+    (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on another person's pixels of
+    ``labels_of(frame id)``, the tracking-size labels) written as not seen, smoothed over time and, with their
+    boxes, in scene pixels; and how many tracks were dropped, by reason."""
     long_enough = [t for t in tracks if len(t.frames) >= config.track_min_frames]
     kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
                   key=lambda t: (t.frames[0], t.index))
@@ -117,6 +117,11 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
         if config.sides_consistent:
             exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
             keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
+        legs = np.zeros(len(track.frames), bool)
+        if config.legs_consistent and survey.static:
+            legs = legs_to_exchange(frames, keypoints, np.array(track.legs_disputed), config.legs_keep_weight,
+                                    config.legs_dispute_share)
+            keypoints, relative3d = exchange_legs(keypoints, relative3d, legs)
         squeezed = np.zeros(len(track.frames), bool)
         if config.border_squeeze_max > 0:
             squeezed = squeezed_at_border(frames / survey.fps, keypoints, track_boxes,
@@ -137,7 +142,8 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps),
                                   [f for f, e in zip(track.frames, exchange) if e],
-                                  [f for f, e in zip(track.frames, squeezed) if e]))
+                                  [f for f, e in zip(track.frames, squeezed) if e],
+                                  [f for f, e in zip(track.frames, legs) if e]))
     return people, dropped
 
 

@@ -86,6 +86,7 @@ class Observation:
     body: np.ndarray | None = None  # [H, W] bool, Tracker._body_pixels, computed once when first needed
     skeleton_distance: np.ndarray | None = None  # [H, W] float32 torso lengths, computed once when first needed
     image: np.ndarray | None = None  # [H, W, 3] the image the landmarks were found in (people painted over or not)
+    legs_disputed: float = 0.0  # share of the model's mirrored runs that named the legs the other way
 
 
 @dataclass
@@ -99,6 +100,7 @@ class Track:
     keypoints: list[np.ndarray] = field(default_factory=list)  # [17, 3] per frame in ``frames``
     relative3d: list[np.ndarray] = field(default_factory=list)  # [17, 4] per frame: PoseLandmarks.coco17_relative3d, confidence
     boxes: list[np.ndarray] = field(default_factory=list)
+    legs_disputed: list[float] = field(default_factory=list)  # per frame: Observation.legs_disputed
     reidentified: list[tuple[int, float]] = field(default_factory=list)  # (frame id, appearance distance)
     jumps: list[int] = field(default_factory=list)  # frame ids where the box jumped (suspected switches)
 
@@ -242,7 +244,8 @@ class Tracker:
         own = mask if covered is None else mask & ~covered
         look = appearance(image if original is None else original, own, split, config.appearance_bins)
         return Observation(found, probability, mask, box, look,
-                           depth_proxy(found), np.concatenate([points, confidence[:, None]], 1), image=image)
+                           depth_proxy(found), np.concatenate([points, confidence[:, None]], 1), image=image,
+                           legs_disputed=found.legs_disputed)
 
     # ------------------------------------------------------------------ one frame
     def step(self, frame_id: int, image: np.ndarray) -> list[tuple[Track, Observation]]:
@@ -275,10 +278,11 @@ class Tracker:
             if self.pose is not None:
                 points, scores = self.pose(image, observation.box)
                 observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
+                observation.legs_disputed = 0.0  # BlazePose's runs say nothing about another model's names
             elif config.keypoint_crop_shifts:
-                median = self.model.median_points(observation.image, observation.landmarks,
-                                                  tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
-                                                  config.landmark_flip_average)
+                median, observation.legs_disputed = self.model.median_points(
+                    observation.image, observation.landmarks, tuple(config.keypoint_crop_shifts),
+                    config.landmark_refine_heatmap, config.landmark_flip_average)
                 observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
             self._update(track, observation, frame_id)
             result.append((track, observation))
@@ -488,3 +492,4 @@ class Tracker:
         relative = landmarks.coco17_relative3d()
         track.relative3d.append(np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0), confidence[:, None]], 1))
         track.boxes.append(observation.box)
+        track.legs_disputed.append(observation.legs_disputed)
