@@ -72,28 +72,43 @@ def side_displacements(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return (kept / count, exchanged / count) if count else (0.0, 0.0)
 
 
+def _torso_scale(keypoints: np.ndarray) -> np.ndarray:
+    """[T, 17, 3] -> [T] pixels: each frame's torso length, the track's median where a frame has none (1 if no
+    frame has one)."""
+    torso = torso_lengths(keypoints)
+    return np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
+
+
+def _cheapest_states(unary: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Viterbi over two states per frame (0: labels kept, 1: exchanged): unary [T, 2] costs of each frame's
+    states, steps [T, 2, 2] costs of going from frame t - 1's state (first index) to frame t's (steps[0] unused)
+    -> [T] bool, the states of the cheapest path (ties keep the labels)."""
+    count = len(unary)
+    cost = unary[0].copy()
+    back = np.zeros((count, 2), int)
+    for t in range(1, count):
+        total = cost[:, None] + steps[t]  # [previous state, this state]
+        back[t] = np.argmin(total, axis=0)
+        cost = total[back[t], [0, 1]] + unary[t]
+    states = np.zeros(count, int)
+    states[-1] = int(np.argmin(cost))
+    for t in range(count - 1, 0, -1):
+        states[t - 1] = back[t, states[t]]
+    return states.astype(bool)
+
+
 def sides_to_exchange(keypoints: np.ndarray, keep_weight: float) -> np.ndarray:
     """[T, 17, 3] one track's COCO-17 keypoints in frame order -> [T] bool: the frames whose left/right pairs
     are to be exchanged (module docstring; ``keep_weight`` in torso lengths per exchanged frame)."""
     count = len(keypoints)
     if count == 0:
         return np.zeros(0, bool)
-    torso = torso_lengths(keypoints)
-    scale = np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
-    unary = np.array([0.0, keep_weight])  # state 0: labels kept; 1: exchanged
-    cost = unary.copy()
-    back = np.zeros((count, 2), int)
+    scale = _torso_scale(keypoints)
+    steps = np.zeros((count, 2, 2))
     for t in range(1, count):
         kept, exchanged = side_displacements(keypoints[t - 1], keypoints[t])
-        jump = np.array([[kept, exchanged], [exchanged, kept]]) / max(scale[t - 1], scale[t], 1e-6)
-        total = cost[:, None] + jump  # [previous state, this state]
-        back[t] = np.argmin(total, axis=0)
-        cost = total[back[t], [0, 1]] + unary
-    states = np.zeros(count, int)
-    states[-1] = int(np.argmin(cost))
-    for t in range(count - 1, 0, -1):
-        states[t - 1] = back[t, states[t]]
-    return states.astype(bool)
+        steps[t] = np.array([[kept, exchanged], [exchanged, kept]]) / max(scale[t - 1], scale[t], 1e-6)
+    return _cheapest_states(np.tile([0.0, keep_weight], (count, 1)), steps)
 
 
 def legs_to_exchange(frames: np.ndarray, keypoints: np.ndarray, disputed: np.ndarray, keep_weight: float,
@@ -108,28 +123,18 @@ def legs_to_exchange(frames: np.ndarray, keypoints: np.ndarray, disputed: np.nda
     count = len(keypoints)
     if count == 0:
         return np.zeros(0, bool)
-    torso = torso_lengths(keypoints)
-    scale = np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
+    scale = _torso_scale(keypoints)
     unary = np.stack([np.zeros(count), np.where(np.asarray(disputed) >= dispute_share, 0.0, keep_weight)], 1)
     ankles, exchanged = list(COCO17_ANKLES), list(COCO17_ANKLES[::-1])
-    cost = unary[0].copy()
-    back = np.zeros((count, 2), int)
+    steps = np.zeros((count, 2, 2))
     for t in range(1, count):
         before, now = keypoints[t - 1], keypoints[t]
-        step = np.zeros((2, 2))  # [previous state, this state]
         if frames[t] - frames[t - 1] == 1 and (before[ankles, 2] > 0).all() and (now[ankles, 2] > 0).all():
             for previous, order_before in enumerate((ankles, exchanged)):
                 for state, order_now in enumerate((ankles, exchanged)):
                     moved = np.linalg.norm(now[order_now, :2] - before[order_before, :2], axis=1)
-                    step[previous, state] = moved.min() / max(scale[t - 1], scale[t], 1e-6)
-        total = cost[:, None] + step
-        back[t] = np.argmin(total, axis=0)
-        cost = total[back[t], [0, 1]] + unary[t]
-    states = np.zeros(count, int)
-    states[-1] = int(np.argmin(cost))
-    for t in range(count - 1, 0, -1):
-        states[t - 1] = back[t, states[t]]
-    return states.astype(bool)
+                    steps[t, previous, state] = moved.min() / max(scale[t - 1], scale[t], 1e-6)
+    return _cheapest_states(unary, steps)
 
 
 def exchange_legs(keypoints: np.ndarray, relative3d: np.ndarray, exchange: np.ndarray
