@@ -9,7 +9,8 @@ run would: one floor for everyone, the size prior the ingest writes)
 three times (`--variants` picks): from the 2D keypoints only (2d: 02_smpl_fit.relative3d false), with the metric 3D
 keypoints and their size (3d-size: relative3d_size model), and with them up to one size factor per person
 (3d-fitted).
-Per scene: mean per-joint error with no alignment and after one similarity per person's sequence, pelvis
+Per scene: mean per-joint error with no alignment, up to one scale for the whole scene about the camera (what no
+single view tells: glimpse.fit.evaluate.scene_scale_errors) and after one similarity per person's sequence, pelvis
 distance errors, depth order agreement (glimpse.fit.evaluate), and how the metric 3D keypoints themselves
 compare with the true body's (turned onto each frame's viewing ray as stage 02 does); then the common floor
 against the true one (glimpse.fit.evaluate.floor_errors: its tilt, split into the camera's pitch and roll, and
@@ -40,7 +41,7 @@ from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import floor_errors, joint_errors, placement_errors  # noqa: E402
+from glimpse.fit.evaluate import floor_errors, joint_errors, placement_errors, scene_scale_errors  # noqa: E402
 from glimpse.fit.stage import Fitter, onto_viewing_rays  # noqa: E402
 from glimpse.fixtures.scenes import FREE_BODY  # noqa: E402
 from glimpse.ingest.config import load_ingest_config  # noqa: E402
@@ -136,12 +137,14 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel, variants: list[s
         fitted = {ids[fit.pid]: fit.params for fit in fits}
         truths = {pid: dict(np.load(truth_dir / f"{pid}_body.npz")) for pid in fitted}
         placement = placement_errors(model, fitted, truths, centres)
+        scene_scale, scene_scaled = scene_scale_errors(model, fitted, truths, centres)
         frames = sum(int((~fit.interpolated).sum()) for fit in fitted.values())
         on_floor = floor_row(floor, cameras)
         for pid, fit in sorted(fitted.items()):
             rows.append({"scenario": scenario, "person": pid, "variant": variant, "floor": floor["applied"],
                          "seconds_per_100_frames": 100 * seconds / frames, **placement, **metric,
-                         **joint_errors(model, fit, truths[pid]), "floor_errors": on_floor})
+                         **joint_errors(model, fit, truths[pid]), "floor_errors": on_floor,
+                         "scene_scale": scene_scale, "scene_scaled_m": scene_scaled[pid]})
     return rows
 
 
@@ -167,13 +170,15 @@ def main() -> None:
     rows = [row for name in args.scenarios.split(",")
             for row in run(name, args.seed, work, model, variants, args.params)]
     print(f"\nStage 02 on ingested fixture videos ({SIZE}, seed {args.seed}, the fixtures' cameras); cm\n")
-    print("| scene | person | metric 3D | floor | as fitted | person-aligned | pelvis distances | depth order | "
-          "metric 3D keypoints' error | their size / true | s per person per 100 frames |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | person | metric 3D | floor | as fitted | up to one scene scale (the scale) | person-aligned | "
+          "pelvis distances | depth order | metric 3D keypoints' error | their size / true | "
+          "s per person per 100 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         distance, order = r["pelvis_distance_error_m"], r["depth_order_agreement"]
         print(f"| {r['scenario']} | {r['person']} | {r['variant']} | "
-              f"{'yes' if r['floor'] else 'no'} | {100 * r['mpjpe_m']:.1f} | {100 * r['sequence_aligned_m']:.1f} | "
+              f"{'yes' if r['floor'] else 'no'} | {100 * r['mpjpe_m']:.1f} | "
+              f"{100 * r['scene_scaled_m']:.1f} ({r['scene_scale']:.3f}) | {100 * r['sequence_aligned_m']:.1f} | "
               f"{'-' if np.isnan(distance) else f'{100 * distance:.1f}'} | "
               f"{'-' if np.isnan(order) else f'{100 * order:.0f}%'} | {100 * r['relative3d_error_m']:.1f} | "
               f"{r['relative3d_size_ratio']:.2f} | {r['seconds_per_100_frames']:.0f} |")

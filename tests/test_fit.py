@@ -17,7 +17,7 @@ from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth
+from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, scene_scale_errors
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
@@ -270,6 +270,33 @@ def test_a_body_moved_by_a_similarity_is_moved_back_onto_the_truth(model):
     bent = replace(placed, body_pose=truth.body_pose + 0.1)
     errors = joint_errors(model, moved_onto_truth(model, bent, _truth(truth))[0], _truth(truth))
     assert errors["mpjpe_m"] == pytest.approx(errors["sequence_aligned_m"], rel=1e-6)
+
+
+def test_the_scene_scale_removes_one_common_factor_about_the_camera_and_nothing_else(model):
+    """scene_scale_errors: two people, each frame scaled by 1.07 about that frame's camera centre (a camera that
+    moves), project to the same pixels and come back exactly; with one of them then moved 30 cm further, no
+    common factor puts both back (each stays over 10 cm off), where the per-person alignment hides it."""
+    frames, factor = 5, 1.07
+    centres = {f: np.array([0.1 * f, 1.5, -0.2]) for f in range(frames)}
+    near = _known_person(model, frames)
+    far = replace(near, transl=near.transl + [1.2, 0.0, 1.5])
+    c = np.stack([centres[f] for f in range(frames)])
+
+    def scaled(person: BodyParams) -> BodyParams:
+        return replace(person, transl=factor * person.transl + (1 - factor) * c, scale=factor * person.scale)
+
+    truths = {"near": _truth(near), "far": _truth(far)}
+    fitted = {"near": scaled(near), "far": scaled(far)}
+    assert joint_errors(model, fitted["far"], truths["far"])["mpjpe_m"] > 0.1
+    scale, errors = scene_scale_errors(model, fitted, truths, centres)
+    assert scale == pytest.approx(1 / factor, rel=1e-7)
+    assert max(errors.values()) < 1e-6
+    off = replace(fitted["far"], transl=fitted["far"].transl + [0.0, 0.0, 0.3])
+    _, errors = scene_scale_errors(model, {**fitted, "far": off}, truths, centres)
+    assert min(errors.values()) > 0.1  # one factor cannot put both back: it splits the difference
+    as_fitted = [joint_errors(model, person, truths[pid])["mpjpe_m"] for pid, person in {**fitted, "far": off}.items()]
+    assert np.mean(list(errors.values())) <= np.mean(as_fitted)  # the best factor is never worse than none
+    assert joint_errors(model, off, truths["far"])["sequence_aligned_m"] < 0.01
 
 
 def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):

@@ -4,6 +4,8 @@ floor energy's gradient (and its units), the whole step on a scene with an adult
 of the prior's size placed at their distance, planted feet under a moving camera, the parallax of planted feet,
 several people on one floor under a moving camera, and heights the user states."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -135,6 +137,26 @@ def test_one_line_of_contacts_leaves_the_tilt_about_it_to_the_up_hint():
     assert person_camera_heights([np.zeros((0, 3))], normal, CAMERA)[0] != person_camera_heights(
         [np.zeros((0, 3))], normal, CAMERA)[0]  # nan without points
     assert placement_factors(np.array([np.nan]), np.zeros(1, bool))[1][0] == 1.0
+
+
+def test_a_floor_whose_up_comes_from_torso_axes_trusts_that_up_further():
+    """The floor's tilt is left to the up hint where the contacts spread less than GroundConfig.normal_prior: further
+    when the hint is the torso axes' measured vertical (static camera), as far as before for the bodies' mean up,
+    and a moving camera keeps its own. Why: a walker's contacts along one line and a person standing still whose
+    fitted feet scatter 20 cm along its viewing ray (the crouch fixture) pitch the floor by that scatter."""
+    ground = config_from_mapping(FitConfig, load_pipeline_yaml()["02_smpl_fit"], "pipeline.yaml").ground
+    torso, bodies = replace(ground, up_from="torso_axes"), replace(ground, up_from="bodies")
+    assert torso.normal_prior(static=True) == ground.torso_normal_prior_m > ground.normal_prior_m
+    assert bodies.normal_prior(static=True) == ground.normal_prior_m
+    assert torso.normal_prior(static=False) == bodies.normal_prior(static=False) == ground.moving_normal_prior_m
+    walker = np.stack([np.linspace(-1.5, 1.5, 40), np.zeros(40), np.full(40, 5.0)], 1)
+    foot = np.array([0.5, 0.0, 3.0])
+    ray = (foot - CAMERA) / np.linalg.norm(foot - CAMERA)
+    still = foot + np.linspace(-0.1, 0.1, 40)[:, None] * ray
+    up = np.array([0.0, 1.0, 0.0])
+    tilt = {kind: np.degrees(np.arccos(floor_normal([walker, still], up, g.normal_prior(static=True)) @ up))
+            for kind, g in (("torso", torso), ("bodies", bodies))}
+    assert tilt["torso"] < tilt["bodies"] / 3, tilt
 
 
 def test_the_parallax_of_planted_feet_measures_a_moving_cameras_placement_factor():

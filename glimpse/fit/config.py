@@ -35,6 +35,7 @@ class GroundConfig:
     contact_span_s: float
     contact_height_m: float
     normal_prior_m: float
+    torso_normal_prior_m: float
     moving_normal_prior_m: float
     standing_thigh_deg: float
     up_from: Literal["torso_axes", "bodies"]
@@ -55,6 +56,14 @@ class GroundConfig:
     stature_child_sigma: float
     stature_child_share: float
     iterations: int
+
+    def normal_prior(self, static: bool) -> float:
+        """Metres (world units): the spread below which the contacts leave the floor's tilt to the up hint
+        (glimpse.fit.ground.floor_normal). A moving camera: ``moving_normal_prior_m``; a static one with the up from
+        the torso axes (a measured vertical): ``torso_normal_prior_m``; else (the bodies' mean up) ``normal_prior_m``."""
+        if not static:
+            return self.moving_normal_prior_m
+        return self.torso_normal_prior_m if self.up_from == "torso_axes" else self.normal_prior_m
 
 
 @dataclass(frozen=True)

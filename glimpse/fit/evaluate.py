@@ -5,6 +5,9 @@ error over the 24 body joints of the fitted (not interpolated) frames, three way
 - ``sequence_aligned_m``: after one similarity (rotation, translation, scale) over the whole
   sequence, the "global alignment" that removes a 2D fit's depth/size ambiguity;
 - ``frame_aligned_m``: after a similarity per frame (PA-MPJPE, as HMR papers report).
+
+For a scene's people together, ``scene_scale_errors`` removes only what no single view can tell: the whole
+scene scaled about the camera by one factor (placement_errors: how people stand relative to each other).
 """
 
 from __future__ import annotations
@@ -13,11 +16,15 @@ from dataclasses import replace
 
 import numpy as np
 import torch
+from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
 from glimpse.body.model import BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.align import Similarity, umeyama
+
+SCENE_SCALE_BOUNDS = (0.25, 4.0)  # the common factor searched: a scene fitted 4 times too near or far is not a fit
+SCENE_SCALE_TOLERANCE = 1e-9  # the factor to this (relative to 1: far below any error that matters)
 
 
 def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, body_pose: np.ndarray,
@@ -91,6 +98,34 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
         return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan")}
     return {"pelvis_distance_error_m": float(np.mean(distance_errors)),
             "depth_order_agreement": float(np.mean(agreements))}
+
+
+def scene_scale_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
+                       camera_centres: dict[int, np.ndarray]) -> tuple[float, dict[str, float]]:
+    """The error of a scene's fits up to the one thing a single view cannot tell: every person scaled about the
+    camera centre by one common factor projects to the same pixels (every frame about that frame's camera centre
+    [3], ``camera_centres`` by frame id), so 2D keypoints fix a scene only up to that factor; a metric cue (a
+    stated height, a known camera height) is what sets it. Each fitted joint x of frame t (fitted, not
+    interpolated frames; truth as in ``joint_errors``) is moved to c_t + s (x - c_t), s the factor that gives the
+    smallest mean per-joint error over all people and frames (a convex function of s, so never more than with
+    s = 1, as fitted). Returns (s, pid -> mean per-joint error after it, world units). Unlike the per-person
+    alignments of ``joint_errors`` this keeps every person's placement relative to the others and to the camera:
+    one person misplaced stays misplaced."""
+    offsets = {}  # pid -> (fitted joints - centre, true joints - centre), each [T * 24, 3]
+    for pid, params in fitted.items():
+        keep = ~params.interpolated
+        centres = np.stack([camera_centres[int(f)] for f in params.frame_ids[keep]])[:, None]
+        fit = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
+                          params.transl[keep], params.scale)
+        true = _true_joints(model, params, truth[pid])
+        offsets[pid] = ((fit - centres).reshape(-1, 3), (true - centres).reshape(-1, 3))
+    fit_all = np.concatenate([f for f, _ in offsets.values()])
+    true_all = np.concatenate([t for _, t in offsets.values()])
+    mean_error = lambda s: float(np.linalg.norm(s * fit_all - true_all, axis=1).mean())
+    found = minimize_scalar(mean_error, bounds=SCENE_SCALE_BOUNDS, method="bounded",
+                            options={"xatol": SCENE_SCALE_TOLERANCE})
+    scale = float(found.x) if mean_error(found.x) <= mean_error(1.0) else 1.0
+    return scale, {pid: float(np.linalg.norm(scale * f - t, axis=1).mean()) for pid, (f, t) in offsets.items()}
 
 
 def floor_errors(normal: np.ndarray, camera_height: float, camera_centre: np.ndarray, R: np.ndarray,

@@ -131,7 +131,7 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     if g.up_from == "torso_axes":
         up_hint = _torso_vertical(pending, feet, up_hint, g)
     grounded = [lowest_points(f.soles, up_hint) for f in feet]
-    normal_prior_m = g.normal_prior_m if static else g.moving_normal_prior_m
+    normal_prior_m = g.normal_prior(static)
     normal = floor_normal(grounded, up_hint, normal_prior_m)
     grounded = near_own_plane(grounded, normal, centre, g.contact_height_m)
     normal = floor_normal(grounded, up_hint, normal_prior_m)
