@@ -393,12 +393,12 @@ def test_a_checkpoint_round_trips_and_a_foreign_or_broken_one_is_not_used(tmp_pa
     track = Track(3, _landmarks_at(rng.normal(size=(BODY_LANDMARKS, 2)), region), rng.random((2, 36)),
                   velocity=np.array([1.5, -0.5]), missing=2, frames=[4, 5], keypoints=[rng.random((17, 3))] * 2,
                   relative3d=[rng.random((17, 4))] * 2, boxes=[rng.random(4)] * 2, reidentified=[(5, 0.25)],
-                  jumps=[5])
+                  jumps=[5], looked_again=[4])
     path = tmp_path / "checkpoint.npz"
     save_checkpoint(path, [track], 6, "key")
     (loaded,), done = load_checkpoint(path, "key")
     assert done == 6 and (loaded.index, loaded.missing, loaded.frames, loaded.jumps) == (3, 2, [4, 5], [5])
-    assert loaded.reidentified == [(5, 0.25)] and np.array_equal(loaded.look, track.look)
+    assert loaded.reidentified == [(5, 0.25)] and loaded.looked_again == [4] and np.array_equal(loaded.look, track.look)
     assert np.array_equal(loaded.landmarks.points, track.landmarks.points)
     restored = loaded.landmarks.region
     assert np.array_equal(restored.centre, region.centre) and (restored.side, restored.angle) == (80.0, 0.3)

@@ -59,7 +59,7 @@ def _track_arrays(track: Track) -> dict[str, np.ndarray]:
         keypoints=np.array(track.keypoints).reshape(-1, 17, 3), relative3d=np.array(track.relative3d).reshape(-1, 17, 4),
         boxes=np.array(track.boxes).reshape(-1, 4), legs_disputed=np.array(track.legs_disputed, float),
         reidentified=np.array(track.reidentified, float).reshape(-1, 2),
-        jumps=np.array(track.jumps, np.int64))
+        jumps=np.array(track.jumps, np.int64), looked_again=np.array(track.looked_again, np.int64))
     return arrays
 
 
@@ -71,7 +71,7 @@ def _track_from(arrays: dict[str, np.ndarray]) -> Track:
                  keypoints=list(arrays["keypoints"]), relative3d=list(arrays["relative3d"]),
                  boxes=list(arrays["boxes"]), legs_disputed=[float(d) for d in arrays["legs_disputed"]],
                  reidentified=[(int(f), float(d)) for f, d in arrays["reidentified"]],
-                 jumps=[int(f) for f in arrays["jumps"]])
+                 jumps=[int(f) for f in arrays["jumps"]], looked_again=[int(f) for f in arrays["looked_again"]])
 
 
 def save_checkpoint(path: Path, tracks: list[Track], frames_done: int, key: str) -> None:

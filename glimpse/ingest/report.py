@@ -33,6 +33,7 @@ class PersonTrack:
     sides_exchanged: list[int] = field(default_factory=list)  # frame ids whose left/right labels were exchanged
     border_squeezed: list[int] = field(default_factory=list)  # frame ids whose keypoints were not written
     legs_exchanged: list[int] = field(default_factory=list)  # frame ids whose knees and ankles were exchanged
+    looked_again: list[int] = field(default_factory=list)  # frame ids the track had missed, filled afterwards
 
 
 def person_colour(k: int) -> tuple[int, int, int]:
@@ -89,6 +90,7 @@ def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict
             "sides_exchanged": person.sides_exchanged,
             "border_squeezed": person.border_squeezed,
             "legs_exchanged": person.legs_exchanged,
+            "looked_again": person.looked_again,
             "suspected_switches": [{"frame": f, "why": "re-identified after a gap", "appearance_distance": round(d, 3)}
                                    for f, d in person.reidentified]
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],

@@ -1,11 +1,13 @@
 """``glimpse ingest VIDEO SCENE_DIR``: an ordinary video -> a glimpse-scene/1 folder.
 
-Three streaming passes (one frame in memory at a time, at the working size):
+Three streaming passes (frames decoded one at a time; the tracking pass also holds its last
+``track_backfill_frames`` frames at the tracking size):
 
 1. survey (glimpse.ingest.survey): frame times, the scene's frames, camera motion, the background plate;
 2. track (glimpse.ingest.tracker): every chosen frame is written to the scene (at ``max_side``) and its
    people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
-   labels go to a work folder;
+   labels go to a work folder; a track that finds its person again looks again at the frames it missed
+   (glimpse.ingest.backfill: the last ``track_backfill_frames`` frames are held for it);
 3. write: per person its masks and COCO-17 keypoints (left and right made consistent along the track, frames
    squeezed at the border and joints hidden behind others left out: glimpse.ingest.sides, glimpse.ingest.truncation,
    glimpse.ingest.occlusion), the preview video and the tracks report
@@ -32,6 +34,7 @@ import numpy as np
 
 from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
+from glimpse.ingest.backfill import fill_gaps, open_gaps
 from glimpse.ingest.blazepose import BlazePose
 from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.ingest.config import IngestConfig
@@ -143,7 +146,7 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                                   list(track.reidentified), list(track.jumps),
                                   [f for f, e in zip(track.frames, exchange) if e],
                                   [f for f, e in zip(track.frames, squeezed) if e],
-                                  [f for f, e in zip(track.frames, legs) if e]))
+                                  [f for f, e in zip(track.frames, legs) if e], sorted(track.looked_again)))
     return people, dropped
 
 
@@ -269,17 +272,18 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
     ``frames_done`` chosen frames (a checkpoint's; their labels are in ``work``); returns the tracks report."""
     track_started = time.perf_counter()
     track_size = (survey.track_width, survey.track_height)
+    recent: dict[int, np.ndarray] = {}  # the last ingest.track_backfill_frames frames at the tracking size
     for index, (frame_id, rgb) in enumerate(_chosen_frames(video, survey, "tracking people")):
         writer.frame(frame_id, resized(rgb, (survey.width, survey.height)))
-        if index < frames_done:
-            continue
+        if index < frames_done - config.track_backfill_frames:
+            continue  # tracked before the checkpoint, and too early to be looked at again
         tracked = resized(rgb, track_size)
-        observed = tracker.step(frame_id, tracked)
-        labels = depth_ordered_labels(observed, tracked.shape[:2], config.mask_threshold, config.mask_body_radius,
-                                      config.mask_depth_cue, config.mask_depth_frames)
-        cv2.imwrite(str(_label_path(work, frame_id)), labels)
-        if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
-            save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)
+        if index >= frames_done:
+            _track_frame(tracker, frame_id, tracked, recent, work, config)
+            if config.checkpoint_frames > 0 and (index + 1) % config.checkpoint_frames == 0:
+                save_checkpoint(work / CHECKPOINT_FILE, tracker.tracks, index + 1, key)
+        recent[frame_id] = tracked
+        recent = {fid: image for fid, image in recent.items() if fid > frame_id - config.track_backfill_frames}
     track_seconds = time.perf_counter() - track_started
     people, dropped = _kept_people(tracker.tracks, survey, config,
                                    lambda frame_id: _read_labels(work, frame_id))
@@ -303,6 +307,20 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
         write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
                   survey.fps)
     return tracks_report(people, dropped, _facts(video, survey, config, track_seconds, frames_done))
+
+
+def _track_frame(tracker: Tracker, frame_id: int, image: np.ndarray, recent: dict[int, np.ndarray], work: Path,
+                 config: IngestConfig) -> None:
+    """Track one frame (``image`` at the tracking size), write its depth-ordered labels to ``work``, then look
+    again at the ``recent`` frames (frame id -> image) that a track found again here had missed
+    (glimpse.ingest.backfill), their labels rewritten."""
+    gaps = open_gaps(tracker.tracks, config.track_backfill_frames)
+    observed = tracker.step(frame_id, image)
+    labels = depth_ordered_labels(observed, image.shape[:2], config.mask_threshold, config.mask_body_radius,
+                                  config.mask_depth_cue, config.mask_depth_frames)
+    cv2.imwrite(str(_label_path(work, frame_id)), labels)
+    fill_gaps(tracker, gaps, observed, frame_id, recent, lambda fid: _read_labels(work, fid),
+              lambda fid, filled: cv2.imwrite(str(_label_path(work, fid)), filled))
 
 
 def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:

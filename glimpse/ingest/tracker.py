@@ -34,6 +34,7 @@ skeleton passes close to it, else to the closest skeleton.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -103,6 +104,7 @@ class Track:
     legs_disputed: list[float] = field(default_factory=list)  # per frame: Observation.legs_disputed
     reidentified: list[tuple[int, float]] = field(default_factory=list)  # (frame id, appearance distance)
     jumps: list[int] = field(default_factory=list)  # frame ids where the box jumped (suspected switches)
+    looked_again: list[int] = field(default_factory=list)  # frame ids filled afterwards (:meth:`Tracker.look_again`)
 
     @property
     def region(self) -> Region:
@@ -275,18 +277,45 @@ class Tracker:
             if observation is None:
                 track.missing += 1
                 continue
-            if self.pose is not None:
-                points, scores = self.pose(image, observation.box)
-                observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
-                observation.legs_disputed = 0.0  # BlazePose's runs say nothing about another model's names
-            elif config.keypoint_crop_shifts:
-                median, observation.legs_disputed = self.model.median_points(
-                    observation.image, observation.landmarks, tuple(config.keypoint_crop_shifts),
-                    config.landmark_refine_heatmap, config.landmark_flip_average)
-                observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
+            self._written_keypoints(image, observation)
             self._update(track, observation, frame_id)
             result.append((track, observation))
         return result
+
+    def _written_keypoints(self, image: np.ndarray, observation: Observation) -> None:
+        """Set the keypoints the scene gets: the user's pose model's, or the median of BlazePose's runs over
+        shifted crops (``keypoint_crop_shifts``), else the observation's own."""
+        config = self.config
+        if self.pose is not None:
+            points, scores = self.pose(image, observation.box)
+            observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
+            observation.legs_disputed = 0.0  # BlazePose's runs say nothing about another model's names
+        elif config.keypoint_crop_shifts:
+            median, observation.legs_disputed = self.model.median_points(
+                observation.image, observation.landmarks, tuple(config.keypoint_crop_shifts),
+                config.landmark_refine_heatmap, config.landmark_flip_average)
+            observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
+
+    def look_again(self, image: np.ndarray, region: Region, others: np.ndarray, track: Track, frame_id: int
+                   ) -> Observation | None:
+        """A frame the track missed, looked at again afterwards (glimpse.ingest.backfill): its person in ``region``
+        with the people found there (``others`` [H, W] bool, their labels) painted over (:meth:`_painted_over`).
+        Kept, and recorded in the track at ``frame_id`` (its state, which describes a later frame, unchanged),
+        only when it lies mostly off the others (``track_behind_max_overlap``) and looks like the track as a
+        re-identified person must (``track_reid_max_distance``)."""
+        observation = self.observe(self._painted_over(image, others), region, image, others)
+        if observation is None:
+            return None
+        body = self._body_pixels(observation)
+        if np.count_nonzero(body & others) > self.config.track_behind_max_overlap * max(np.count_nonzero(body), 1):
+            return None
+        if (comparable(track.look, observation.look)
+                and appearance_distance(track.look, observation.look) > self.config.track_reid_max_distance):
+            return None
+        self._written_keypoints(image, observation)
+        self._record(track, observation, frame_id)
+        track.looked_again.append(frame_id)
+        return observation
 
     def _resolve_duplicates(self, followed: dict[int, Observation]) -> list[int]:
         """Of two observations of one person drop the piece (a part taken for a person), or the one whose
@@ -482,14 +511,22 @@ class Tracker:
         track.landmarks = landmarks
         track.missing = 0
         track.look = blend(track.look, observation.look, config.appearance_update)
+        self._record(track, observation, frame_id)
+
+    def _record(self, track: Track, observation: Observation, frame_id: int) -> None:
+        """Add the observation's keypoints (those outside the image or below ``keypoint_min_confidence`` at
+        confidence 0), 3D landmarks, box and legs' dispute to the track's per-frame lists, in frame order."""
         points, confidence = observation.keypoints[:, :2], observation.keypoints[:, 2]
         height, width = observation.mask.shape
         inside = (points[:, 0] >= -0.5) & (points[:, 0] <= width - 0.5) & (points[:, 1] >= -0.5) & (points[:, 1] <= height - 0.5)
         confidence = np.where(inside, confidence, 0.0)
-        confidence = np.where(confidence >= config.keypoint_min_confidence, confidence, 0.0)
-        track.frames.append(frame_id)
-        track.keypoints.append(np.concatenate([np.where(confidence[:, None] > 0, points, 0.0), confidence[:, None]], 1))
-        relative = landmarks.coco17_relative3d()
-        track.relative3d.append(np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0), confidence[:, None]], 1))
-        track.boxes.append(observation.box)
-        track.legs_disputed.append(observation.legs_disputed)
+        confidence = np.where(confidence >= self.config.keypoint_min_confidence, confidence, 0.0)
+        at = bisect.bisect(track.frames, frame_id)
+        track.frames.insert(at, frame_id)
+        track.keypoints.insert(at, np.concatenate([np.where(confidence[:, None] > 0, points, 0.0),
+                                                   confidence[:, None]], 1))
+        relative = observation.landmarks.coco17_relative3d()
+        track.relative3d.insert(at, np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0),
+                                                    confidence[:, None]], 1))
+        track.boxes.insert(at, observation.box)
+        track.legs_disputed.insert(at, observation.legs_disputed)

@@ -1,0 +1,74 @@
+"""Looking again at the frames a track missed, once it has found its person after them.
+
+Following a person frame by frame only looks forward: where someone passes behind another person, their region is
+extrapolated from before the gap, and once the model loses them (half hidden, an arm of the person in front across
+them) they are found again only when a detector or the foreground brings them back, some frames later. Those frames
+are the ones a reconstruction needs most. When a track sees its person again after missing at most
+``track_backfill_frames`` frames, each missed frame still held is looked at again, backwards from where the person
+is seen again: the region around the box between the person's boxes before the gap and at the next sighting
+(interpolated over time; a frame filled is the next sighting for the one before it, as when a detector's box starts
+a region), with the people found in that frame painted over. What is found there is kept only under the rules of
+looking behind someone (mostly off the others' pixels, looking like the track as a re-identified person must); it
+is given the pixels of its segmentation that nobody found in that frame holds (whoever a track lost was behind
+them), and nothing is invented for frames where the person stays hidden.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from glimpse.ingest.blazepose import REGION_GROW
+from glimpse.ingest.crop import region_around_box
+from glimpse.ingest.tracker import Track, Tracker
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A track that has not seen its person since ``last_frame``, where their landmarks' box was ``box`` (x0, y0,
+    x1, y1, pixels)."""
+
+    track: Track
+    last_frame: int
+    box: np.ndarray
+
+
+def open_gaps(tracks: list[Track], max_frames: int) -> dict[int, Gap]:
+    """Track index -> its gap, for the tracks that have missed their person in 1 to ``max_frames`` frames since
+    they last saw them (call before :meth:`Tracker.step`)."""
+    return {t.index: Gap(t, t.frames[-1], t.boxes[-1]) for t in tracks if t.frames and 0 < t.missing <= max_frames}
+
+
+def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list, frame_id: int,
+              images: dict[int, np.ndarray], labels_of: Callable[[int], np.ndarray],
+              write_labels: Callable[[int, np.ndarray], None]) -> list[tuple[int, int]]:
+    """For every track of ``observed`` (:meth:`Tracker.step`'s result for ``frame_id``) that had a gap, look again
+    at each missed frame held in ``images`` (frame id -> [H, W, 3] uint8 at the tracking size), backwards; a person
+    found is recorded in the track and given the pixels of their segmentation no one holds in that frame's labels
+    (``labels_of`` / ``write_labels``: [H, W] uint16, 0 = nobody, else 1 + track index). Returns (track index,
+    frame id) of every frame filled."""
+    filled = []
+    for track, observation in observed:
+        gap = gaps.get(track.index)
+        if gap is None:
+            continue
+        later, later_frame = observation.box, frame_id  # the nearest later sighting
+        for missed in range(frame_id - 1, gap.last_frame, -1):
+            if missed not in images:
+                continue
+            labels = labels_of(missed)
+            label = track.index + 1
+            others = (labels != 0) & (labels != label)
+            weight = (missed - gap.last_frame) / (later_frame - gap.last_frame)
+            region = region_around_box((1 - weight) * gap.box + weight * later, REGION_GROW)
+            found = tracker.look_again(images[missed], region, others, track, missed)
+            if found is None:
+                continue
+            later, later_frame = found.box, missed
+            labels = labels.copy()
+            labels[found.mask & (labels == 0)] = label
+            write_labels(missed, labels)
+            filled.append((track.index, missed))
+    return filled
