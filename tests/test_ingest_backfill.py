@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from glimpse.ingest.backfill import fill_gaps, open_gaps
+from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
@@ -114,3 +114,27 @@ def test_only_tracks_missing_at_most_the_backfill_frames_have_an_open_gap(tracke
         tracks.append(track)
     assert set(open_gaps(tracks, 15)) == {1, 2}
     assert open_gaps(tracks, 0) == {}
+
+
+def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracker, monkeypatch) -> None:
+    look = np.full((2, 36), 1 / 36)
+    started = _observation(140.0, look)
+    track = Track(0, started.landmarks, look.copy())
+    tracker.tracks = [track]
+    tracker._update(track, started, 5)
+    looked: list[tuple[int, float]] = []
+
+    def observe(self, image, region, original=None, covered=None):  # the person walks 10 px right a frame
+        frame = int(image[0, 0, 0])
+        looked.append((frame, float(region.centre[0])))
+        return _observation(140.0 - 10.0 * (5 - frame), look) if frame >= 3 else None
+
+    monkeypatch.setattr(Tracker, "observe", observe)
+    images = {f: np.full(SIZE + (3,), f, np.uint8) for f in (1, 2, 3, 4)}
+    labels = {f: np.zeros(SIZE, np.uint16) for f in images}
+    filled = look_before_start(tracker, [track], 5, images, lambda f: labels[f],
+                               lambda f, new: labels.__setitem__(f, new))
+    # each frame in the region around the box found in the frame after; stops at frame 2, where nobody is
+    assert looked == [(4, pytest.approx(140.0)), (3, pytest.approx(130.0)), (2, pytest.approx(120.0))]
+    assert filled == [(0, 4), (0, 3)] and track.frames == [3, 4, 5] and track.looked_again == [4, 3]
+    assert (labels[3] == 1).any() and not labels[2].any() and not labels[1].any()

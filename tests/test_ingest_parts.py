@@ -351,10 +351,13 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     tall = track(0, config.track_min_frames, 0.5 * 480)
     small = track(1, 40, 0.5 * config.track_min_height * 480)  # a pattern on the floor, followed for long
     short = track(2, config.track_min_frames - 1, 0.5 * 480)
-    people, dropped = _kept_people([tall, small, short], survey, config, lambda frame_id: np.zeros((480, 640), np.uint16))
-    assert [p.label for p in people] == [1] and dropped == {"short": 1, "small": 1}
+    filled_up = track(3, config.track_min_frames + 1, 0.5 * 480)  # long enough only with two frames looked at again
+    filled_up.looked_again = [0, 1]
+    people, dropped = _kept_people([tall, small, short, filled_up], survey, config,
+                                   lambda frame_id: np.zeros((480, 640), np.uint16))
+    assert [p.label for p in people] == [1] and dropped == {"short": 2, "small": 1}
     report = tracks_report(people, dropped, {})
-    assert report["dropped_short_tracks"] == 1 and report["dropped_small_tracks"] == 1
+    assert report["dropped_short_tracks"] == 2 and report["dropped_small_tracks"] == 1
 
 
 def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -> None:

@@ -1,4 +1,5 @@
-"""Looking again at the frames a track missed, once it has found its person after them.
+"""Looking again at the frames a track missed, once it has found its person after them (and before a track's
+first frame, for a person found late).
 
 Following a person frame by frame only looks forward: where someone passes behind another person, their region is
 extrapolated from before the gap, and once the model loses them (half hidden, an arm of the person in front across
@@ -10,7 +11,8 @@ is seen again: the region around the box between the person's boxes before the g
 a region), with the people found in that frame painted over. What is found there is kept only under the rules of
 looking behind someone (mostly off the others' pixels, looking like the track as a re-identified person must); it
 is given the pixels of its segmentation that nobody found in that frame holds (whoever a track lost was behind
-them), and nothing is invented for frames where the person stays hidden.
+them), and nothing is invented for frames where the person stays hidden. A track that starts late (someone
+entering, or first seen from behind) looks back the same way, frame by frame, until a frame without its person.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from glimpse.ingest.blazepose import REGION_GROW
-from glimpse.ingest.crop import region_around_box
-from glimpse.ingest.tracker import Track, Tracker
+from glimpse.ingest.crop import Region, region_around_box
+from glimpse.ingest.tracker import Observation, Track, Tracker
 
 
 @dataclass(frozen=True)
@@ -58,17 +60,46 @@ def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list, frame_id: 
         for missed in range(frame_id - 1, gap.last_frame, -1):
             if missed not in images:
                 continue
-            labels = labels_of(missed)
-            label = track.index + 1
-            others = (labels != 0) & (labels != label)
             weight = (missed - gap.last_frame) / (later_frame - gap.last_frame)
             region = region_around_box((1 - weight) * gap.box + weight * later, REGION_GROW)
-            found = tracker.look_again(images[missed], region, others, track, missed)
-            if found is None:
-                continue
-            later, later_frame = found.box, missed
-            labels = labels.copy()
-            labels[found.mask & (labels == 0)] = label
-            write_labels(missed, labels)
-            filled.append((track.index, missed))
+            found = _look_again(tracker, track, missed, region, images[missed], labels_of, write_labels)
+            if found is not None:
+                later, later_frame = found.box, missed
+                filled.append((track.index, missed))
     return filled
+
+
+def look_before_start(tracker: Tracker, started: list[Track], frame_id: int, images: dict[int, np.ndarray],
+                      labels_of: Callable[[int], np.ndarray],
+                      write_labels: Callable[[int, np.ndarray], None]) -> list[tuple[int, int]]:
+    """Every track ``started`` at ``frame_id`` looks back at the frames before it held in ``images``, each in the
+    region around its box in the frame after (a person moves little between two frames), until a frame where it
+    does not find its person (found late: entering, or first seen from behind). The rest as :func:`fill_gaps`."""
+    filled = []
+    for track in started:
+        box = track.boxes[0]
+        for earlier in range(frame_id - 1, frame_id - 1 - len(images), -1):
+            if earlier not in images:
+                break
+            found = _look_again(tracker, track, earlier, region_around_box(box, REGION_GROW), images[earlier],
+                                labels_of, write_labels)
+            if found is None:
+                break
+            box = found.box
+            filled.append((track.index, earlier))
+    return filled
+
+
+def _look_again(tracker: Tracker, track: Track, frame_id: int, region: Region, image: np.ndarray,
+                labels_of: Callable[[int], np.ndarray], write_labels: Callable[[int, np.ndarray], None]
+                ) -> Observation | None:
+    """:meth:`Tracker.look_again` for ``track`` in one earlier frame, the people of its labels painted over; what
+    is found takes the pixels of its segmentation that nobody holds there. Returns the observation or None."""
+    labels = labels_of(frame_id)
+    label = track.index + 1
+    found = tracker.look_again(image, region, (labels != 0) & (labels != label), track, frame_id)
+    if found is not None:
+        labels = labels.copy()
+        labels[found.mask & (labels == 0)] = label
+        write_labels(frame_id, labels)
+    return found

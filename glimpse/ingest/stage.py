@@ -27,6 +27,7 @@ import re
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -34,7 +35,7 @@ import numpy as np
 
 from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
-from glimpse.ingest.backfill import fill_gaps, open_gaps
+from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
 from glimpse.ingest.blazepose import BlazePose
 from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.ingest.config import IngestConfig
@@ -88,6 +89,10 @@ def _read_labels(work: Path, frame_id: int) -> np.ndarray:
     return cv2.imread(str(_label_path(work, frame_id)), cv2.IMREAD_UNCHANGED)
 
 
+def _write_labels(work: Path, frame_id: int, labels: np.ndarray) -> None:
+    cv2.imwrite(str(_label_path(work, frame_id)), labels)
+
+
 def _chosen_frames(path: Path, survey: Survey, desc: str) -> Iterator[tuple[int, np.ndarray]]:
     """(scene frame id, [H, W, 3] uint8 at the decoded size) of the survey's chosen frames, decoded again."""
     for index, rgb in iter_video_frames(path, survey.chosen, desc):
@@ -102,13 +107,13 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
 
 def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                  labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
-    """Tracks seen in at least ``track_min_frames`` frames whose box is usually (median over their frames) at
-    least ``track_min_height`` of the frame's height, named p0, p1, ... in order of first appearance, their
-    keypoints' left and right (and their legs', on a static camera) made consistent along the track
-    (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on another person's pixels of
-    ``labels_of(frame id)``, the tracking-size labels) written as not seen, smoothed over time and, with their
+    """Tracks seen in at least ``track_min_frames`` frames (not counting frames looked at again) whose box is usually
+    (median over their frames) at least ``track_min_height`` of the frame's height, named p0, p1, ... in order of
+    first appearance, their keypoints' left and right (and their legs', on a static camera) made consistent along
+    the track (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on another person's pixels
+    of ``labels_of(frame id)``, the tracking-size labels) written as not seen, smoothed over time and, with their
     boxes, in scene pixels; and how many tracks were dropped, by reason."""
-    long_enough = [t for t in tracks if len(t.frames) >= config.track_min_frames]
+    long_enough = [t for t in tracks if len(t.frames) - len(t.looked_again) >= config.track_min_frames]
     kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
                   key=lambda t: (t.frames[0], t.index))
     dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(kept)}
@@ -312,15 +317,17 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
 def _track_frame(tracker: Tracker, frame_id: int, image: np.ndarray, recent: dict[int, np.ndarray], work: Path,
                  config: IngestConfig) -> None:
     """Track one frame (``image`` at the tracking size), write its depth-ordered labels to ``work``, then look
-    again at the ``recent`` frames (frame id -> image) that a track found again here had missed
-    (glimpse.ingest.backfill), their labels rewritten."""
+    again at the ``recent`` frames (frame id -> image) that a track found again here had missed, and before the
+    frame where a track started here (glimpse.ingest.backfill), their labels rewritten."""
     gaps = open_gaps(tracker.tracks, config.track_backfill_frames)
+    known = len(tracker.tracks)
     observed = tracker.step(frame_id, image)
     labels = depth_ordered_labels(observed, image.shape[:2], config.mask_threshold, config.mask_body_radius,
                                   config.mask_depth_cue, config.mask_depth_frames)
-    cv2.imwrite(str(_label_path(work, frame_id)), labels)
-    fill_gaps(tracker, gaps, observed, frame_id, recent, lambda fid: _read_labels(work, fid),
-              lambda fid, filled: cv2.imwrite(str(_label_path(work, fid)), filled))
+    _write_labels(work, frame_id, labels)
+    labels_of, write_labels = partial(_read_labels, work), partial(_write_labels, work)
+    fill_gaps(tracker, gaps, observed, frame_id, recent, labels_of, write_labels)
+    look_before_start(tracker, tracker.tracks[known:], frame_id, recent, labels_of, write_labels)
 
 
 def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:
