@@ -43,7 +43,7 @@ def open_gaps(tracks: list[Track], max_frames: int) -> dict[int, Gap]:
     return {t.index: Gap(t, t.frames[-1], t.boxes[-1]) for t in tracks if t.frames and 0 < t.missing <= max_frames}
 
 
-def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list, frame_id: int,
+def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list[tuple[Track, Observation]], frame_id: int,
               images: dict[int, np.ndarray], labels_of: Callable[[int], np.ndarray],
               write_labels: Callable[[int, np.ndarray], None]) -> list[tuple[int, int]]:
     """For every track of ``observed`` (:meth:`Tracker.step`'s result for ``frame_id``) that had a gap, look again
