@@ -29,10 +29,9 @@ from glimpse.ingest.tracker import Observation, Track, Tracker
 
 @dataclass(frozen=True)
 class Gap:
-    """A track that has not seen its person since ``last_frame``, where their landmarks' box was ``box`` (x0, y0,
-    x1, y1, pixels)."""
+    """A track (by index, in :func:`open_gaps`' dict) that has not seen its person since ``last_frame``, where their
+    landmarks' box was ``box`` (x0, y0, x1, y1, pixels)."""
 
-    track: Track
     last_frame: int
     box: np.ndarray
 
@@ -40,7 +39,7 @@ class Gap:
 def open_gaps(tracks: list[Track], max_frames: int) -> dict[int, Gap]:
     """Track index -> its gap, for the tracks that have missed their person in 1 to ``max_frames`` frames since
     they last saw them (call before :meth:`Tracker.step`)."""
-    return {t.index: Gap(t, t.frames[-1], t.boxes[-1]) for t in tracks if t.frames and 0 < t.missing <= max_frames}
+    return {t.index: Gap(t.frames[-1], t.boxes[-1]) for t in tracks if t.frames and 0 < t.missing <= max_frames}
 
 
 def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list[tuple[Track, Observation]], frame_id: int,

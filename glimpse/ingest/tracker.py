@@ -152,6 +152,13 @@ def same_person(a: PoseLandmarks, b: PoseLandmarks, config: IngestConfig) -> boo
     return bool(distance[both].mean() < config.track_same_person * scale or shared >= config.track_shared_points)
 
 
+def looks_like(track: Track, observation: Observation, max_distance: float) -> bool:
+    """Whether what was found looks like the track's person: appearance distance at most ``max_distance``, or no
+    half of the body that both appearances have (then the appearance says nothing either way)."""
+    return (not comparable(track.look, observation.look)
+            or appearance_distance(track.look, observation.look) <= max_distance)
+
+
 def part_of(small: Observation, large: Observation, max_scale: float) -> bool:
     """Whether ``small`` is a piece of ``large``'s person taken for a whole person (a face the detector found,
     fitted as a tiny body): at most ``max_scale`` of its torso length, its landmark box inside the other's."""
@@ -259,8 +266,7 @@ class Tracker:
             observation = self.observe(image, track.predicted_region())
             if observation is None:
                 continue
-            if (not comparable(track.look, observation.look)
-                    or appearance_distance(track.look, observation.look) <= config.track_follow_max_distance):
+            if looks_like(track, observation, config.track_follow_max_distance):
                 followed[track.index] = observation
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
         for track in live:
@@ -306,11 +312,8 @@ class Tracker:
         observation = self.observe(self._painted_over(image, others), region, image, others)
         if observation is None:
             return None
-        body = self._body_pixels(observation)
-        if np.count_nonzero(body & others) > self.config.track_behind_max_overlap * max(np.count_nonzero(body), 1):
-            return None
-        if (comparable(track.look, observation.look)
-                and appearance_distance(track.look, observation.look) > self.config.track_reid_max_distance):
+        if (self._lies_on(observation, others, self.config.track_behind_max_overlap)
+                or not looks_like(track, observation, self.config.track_reid_max_distance)):
             return None
         self._written_keypoints(image, observation)
         self._record(track, observation, frame_id)
@@ -397,7 +400,7 @@ class Tracker:
             return
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
         limit = self.config.track_reid_max_distance if track.missing else self.config.track_follow_max_distance
-        if comparable(track.look, observation.look) and appearance_distance(track.look, observation.look) > limit:
+        if not looks_like(track, observation, limit):
             return
         followed[track.index] = observation
 
@@ -452,9 +455,14 @@ class Tracker:
             return True
         if not found:
             return False
+        others = self._bodies(found, observation.mask.shape) if found_bodies is None else found_bodies
+        return self._lies_on(observation, others, max_overlap)
+
+    def _lies_on(self, observation: Observation, pixels: np.ndarray, max_overlap: float) -> bool:
+        """Whether more than ``max_overlap`` of the observation's body pixels (:meth:`_body_pixels`) lie on
+        ``pixels`` [H, W] bool."""
         body = self._body_pixels(observation)
-        others = self._bodies(found, body.shape) if found_bodies is None else found_bodies
-        return np.count_nonzero(body & others) > max_overlap * max(np.count_nonzero(body), 1)
+        return np.count_nonzero(body & pixels) > max_overlap * max(np.count_nonzero(body), 1)
 
     def _reclaim(self, fresh: list[Observation], followed: dict[int, Observation]) -> None:
         """A new observation that overlaps what a track followed this frame and looks like that track better, by
