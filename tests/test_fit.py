@@ -21,7 +21,7 @@ from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, sc
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
-from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy
+from glimpse.fit.objective import FitEnergy, Track, acceleration_energy, data_energy, speed_limit_energy
 from glimpse.fit.priors import (build_pose_prior, joint_limits, mirror_body_pose, motion_poses,
                                 representative_poses)
 from glimpse.fixtures.scenes import FREE_BODY, intrinsics, look_at_pose
@@ -185,6 +185,31 @@ def test_acceleration_energy_of_a_uniformly_accelerated_point():
     assert float(energy) == pytest.approx(3 * 24 * (accel / sigma) ** 2, rel=1e-9)
     assert float(acceleration_energy(joints, times, torch.tensor([0, 1, 30, 31, 32]), sigma, 10)) == pytest.approx(
         1 * 24 * (accel / sigma) ** 2, rel=1e-9)  # triples across a long gap are not linked
+
+
+def test_speed_limit_energy_costs_only_the_excess_over_the_limit():
+    times = torch.arange(12, dtype=F64) / 32  # 32 fps: a span of 0.125 s is 4 frames
+    walker = torch.zeros(12, 3, dtype=F64)
+    walker[:, 0] = 1.4 * times  # walking, under the limit of 3 m/s
+    assert float(speed_limit_energy(walker, times, torch.arange(12), 3.0, 0.5, 0.125, 15)) == 0.0
+    jump = walker.clone()
+    jump[6:, 2] += 2.0  # two metres back between frames 5 and 6: every 4-frame pair across it (2, 3, 4, 5)
+    pairs = torch.arange(8)
+    across = (pairs < 6) & (pairs + 4 >= 6)
+    speeds = torch.sqrt(1.4**2 + (2.0 * across.to(F64) / 0.125) ** 2)
+    expected = (torch.relu(speeds - 3.0) ** 2).sum() / 0.5**2
+    energy = speed_limit_energy(jump, times, torch.arange(12), 3.0, 0.5, 0.125, 15)
+    assert float(energy) == pytest.approx(float(expected), rel=1e-9)
+    far_apart = torch.cat([torch.arange(6), torch.arange(40, 46)])  # the jump across a gap longer than 15 frames
+    assert float(speed_limit_energy(jump, times, far_apart, 3.0, 0.5, 0.125, 15)) == 0.0
+
+
+def test_speed_limit_energy_gradient_matches_finite_differences():
+    times = torch.arange(9, dtype=F64) / 30
+    points = torch.randn(9, 3, dtype=F64, generator=torch.Generator().manual_seed(0)).requires_grad_()
+    energy = lambda p: speed_limit_energy(p, times, torch.arange(9), 3.0, 0.5, 0.1, 15)  # noqa: E731
+    assert float(energy(points)) > 0
+    assert torch.autograd.gradcheck(energy, (points,), eps=1e-6, atol=1e-5)
 
 
 def test_data_energy_is_quadratic_for_small_residuals_and_bounded_for_outliers():

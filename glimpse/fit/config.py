@@ -21,6 +21,9 @@ class FitWeights:
     size_sigma: float
     accel_sigma_m_s2: float
     speed_sigma_m_s: float
+    speed_limit_m_s: float
+    speed_limit_sigma_m_s: float
+    speed_limit_span_s: float
     turn_rate_sigma_deg_s: float
     relative3d_noise_m: float
     relative3d_robust_m: float

@@ -1,7 +1,7 @@
 """The fitting energy of one person over T frames (SMPLify-style, in the spirit of a log posterior):
 
     E = data + w_pose * anneal * pose prior + w_limits * joint limits + w_shape * shape prior + size prior
-        + smoothness + speed
+        + smoothness + speed + speed limit
 
 - data: sum over confident keypoints of ``c * (rho^2 / sigma^2) * r^2 / (r^2 + rho^2)``, a Geman-McClure
   robust square: ``c r^2 / sigma^2`` for residuals well below ``rho``, bounded above. ``r`` is the
@@ -19,6 +19,11 @@
   fitted): the pelvis's squared speed over ``sigma_v^2`` (people walk at about 1.4 m/s). Both in
   metres of body (world units divided by the person's scale), so in SfM units they tell the scale:
   placed at the wrong depth in every frame of a moving camera, a person would race along an arc.
+  Speed limit (every fit): the pelvis's speed above ``speed_limit`` (a run), squared, over
+  ``sigma_limit^2``, measured between frames about ``span`` seconds apart. One view tells a person's
+  distance only by their size in the image, and a few frames with misleading keypoints (a person half
+  hidden behind others, an ankle found on someone else) can put them metres away and back within a
+  second; no walker does that. Below the limit it costs nothing, so it holds no walker back.
   Accelerations are also divided by the body's size over the template's (``KeypointBody.size_ratio``):
   in one view a smaller body nearer the camera projects to the same pixels and accelerates less, so
   in metres the term would pull every 2D fit small and near.
@@ -50,6 +55,7 @@ from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_en
 
 HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
 TEMPLATE_SIZE = 1.0  # KeypointBody.size_ratio of the template (betas 0): what the size prior pulls towards
+SPEED_EPSILON = 1e-12  # (m/s)^2 added under a speed's square root: differentiable where the speed is 0
 MIN_CAMERA_DEPTH = 1e-3  # world units; points nearer than this (or behind) project as if at this depth
 
 
@@ -153,6 +159,23 @@ def speed_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s: 
     keep = ((frame_ids[1:] - frame_ids[:-1]) <= max_gap_frames).to(points.dtype)
     velocity = (points[1:] - points[:-1]) / (times_s[1:] - times_s[:-1])[:, None]
     return (keep * velocity.square().sum(-1)).sum() / sigma_m_s**2
+
+
+def speed_limit_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, limit_m_s: float, sigma_m_s: float,
+                       span_s: float, max_gap_frames: int) -> Tensor:
+    """Squared excess of the speed of points [T, 3] (metres) over ``limit_m_s``, over ``sigma_m_s``^2, summed
+    over the pairs of frames k apart at most ``max_gap_frames`` frame ids apart, k the number of frames that
+    span about ``span_s`` seconds at the track's median frame interval (at least 1): between the consecutive
+    frames of a fast video a fit's jitter of a few centimetres would read as speed."""
+    if len(times_s) < 2:
+        return points.new_zeros(())
+    step = max(1, int(round(span_s / float((times_s[1:] - times_s[:-1]).median()))))
+    if len(times_s) <= step:
+        step = len(times_s) - 1
+    keep = ((frame_ids[step:] - frame_ids[:-step]) <= max_gap_frames).to(points.dtype)
+    velocity = (points[step:] - points[:-step]) / (times_s[step:] - times_s[:-step])[:, None]
+    speed = (velocity.square().sum(-1) + SPEED_EPSILON).sqrt()
+    return (keep * torch.relu(speed - limit_m_s).square()).sum() / sigma_m_s**2
 
 
 def acceleration_energy(joints: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s2: float,
@@ -313,6 +336,10 @@ class FitEnergy:
             if self.use_speed:
                 terms["speed"] = speed_energy(metres[:, 0], self.track.times_s, self.track.frame_ids,
                                               w.speed_sigma_m_s, self.max_gap_frames)
+            if w.speed_limit_m_s > 0:
+                terms["speed_limit"] = speed_limit_energy(metres[:, 0], self.track.times_s, self.track.frame_ids,
+                                                          w.speed_limit_m_s, w.speed_limit_sigma_m_s,
+                                                          w.speed_limit_span_s, self.max_gap_frames)
             if self.floor is not None:
                 soles = self.floor.soles(state.betas, state.global_orient, state.body_pose, state.transl,
                                          state.log_scale.exp()).keypoints
