@@ -15,7 +15,7 @@ from glimpse.body.model_file import JOINT_NAMES
 from glimpse.body.motion import BUILTIN_MOTIONS, SMPL_BODY_JOINTS, builtin_motion
 from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
-from glimpse.errors import GlimpseError
+from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, scene_scale_errors
 from glimpse.fit.keypoint_body import KeypointBody
@@ -210,6 +210,16 @@ def test_speed_limit_energy_gradient_matches_finite_differences():
     energy = lambda p: speed_limit_energy(p, times, torch.arange(9), 3.0, 0.5, 0.1, 15)  # noqa: E731
     assert float(energy(points)) > 0
     assert torch.autograd.gradcheck(energy, (points,), eps=1e-6, atol=1e-5)
+
+
+@pytest.mark.parametrize("bad", [{"speed_limit_m_s": -1.0}, {"speed_limit_sigma_m_s": 0.0},
+                                 {"speed_limit_span_s": -0.1}])
+def test_a_malformed_speed_limit_is_refused_naming_the_parameter(bad):
+    raw = load_pipeline_yaml()["02_smpl_fit"]
+    with pytest.raises(ConfigError, match="02_smpl_fit.weights.speed_limit"):
+        config_from_mapping(FitConfig, {**raw, "weights": {**raw["weights"], **bad}}, "pipeline.yaml")
+    off = {**raw, "weights": {**raw["weights"], "speed_limit_m_s": 0.0, "speed_limit_sigma_m_s": 0.0}}
+    assert config_from_mapping(FitConfig, off, "pipeline.yaml").weights.speed_limit_m_s == 0.0
 
 
 def test_data_energy_is_quadratic_for_small_residuals_and_bounded_for_outliers():

@@ -29,6 +29,15 @@ class FitWeights:
     relative3d_robust_m: float
     relative3d_size: Literal["model", "fitted"]
 
+    def __post_init__(self) -> None:
+        if not self.speed_limit_m_s >= 0 or (self.speed_limit_m_s > 0 and not self.speed_limit_sigma_m_s > 0):
+            raise ConfigError("02_smpl_fit.weights.speed_limit_m_s must be 0 (off) or more (m/s), and "
+                              "speed_limit_sigma_m_s above 0 when it is on; found "
+                              f"{self.speed_limit_m_s} and {self.speed_limit_sigma_m_s}")
+        if not self.speed_limit_span_s >= 0:
+            raise ConfigError(f"02_smpl_fit.weights.speed_limit_span_s must be 0 or more (seconds), found "
+                              f"{self.speed_limit_span_s}")
+
 
 @dataclass(frozen=True)
 class GroundConfig:
