@@ -104,6 +104,24 @@ def test_someone_lying_on_the_others_or_looking_otherwise_is_not_taken(tracker, 
         assert taken or track.frames == [0, 4]
 
 
+def test_someone_found_mostly_on_the_others_keeps_the_frame_but_not_the_keypoints(tracker, monkeypatch) -> None:
+    look = np.full((2, 36), 1 / 36)
+    track, again, gaps = _seen_at_0_then_again_at_4(tracker, look)
+    monkeypatch.setattr(Tracker, "observe", lambda self, image, region, original=None, covered=None:
+                        _observation(float(region.centre[0]), look))
+    labels = {f: np.zeros(SIZE, np.uint16) for f in (2, 3)}
+    for frame in labels:
+        labels[frame][:, 128:] = 7  # frame 3's find (columns 120-139) lies 60% on someone else, frame 2's (110-129) 10%
+    images = {f: np.zeros(SIZE + (3,), np.uint8) for f in (2, 3)}
+    assert tracker.config.track_backfill_keypoints_max_overlap < 0.6 < tracker.config.track_behind_max_overlap
+    filled = fill_gaps(tracker, gaps, [(track, again)], 4, images, lambda f: labels[f],
+                       lambda f, new: labels.__setitem__(f, new))
+    assert filled == [(0, 3), (0, 2)] and track.frames == [0, 2, 3, 4]
+    assert (track.keypoints[2][:, 2] == 0).all() and (track.keypoints[2][:, :2] == 0).all()  # frame 3: not seen
+    assert (track.keypoints[1][:, 2] == 1).all()  # frame 2 keeps its keypoints
+    assert (labels[3] == 1).sum() == 8 * BOX_HEIGHT  # frame 3 still gets the pixels nobody held
+
+
 def test_only_tracks_missing_at_most_the_backfill_frames_have_an_open_gap(tracker) -> None:
     look = np.full((2, 36), 1 / 36)
     tracks = []

@@ -41,6 +41,7 @@ class IngestConfig:
     track_follow_max_distance: float
     track_reclaim_margin: float
     track_backfill_frames: int
+    track_backfill_keypoints_max_overlap: float
     track_min_frames: int
     track_min_height: float
     track_switch_distance: float

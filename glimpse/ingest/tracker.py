@@ -308,14 +308,19 @@ class Tracker:
         with the people found there (``others`` [H, W] bool, their labels) painted over (:meth:`_painted_over`).
         Kept, and recorded in the track at ``frame_id`` (its state, which describes a later frame, unchanged),
         only when it lies mostly off the others (``track_behind_max_overlap``) and looks like the track as a
-        re-identified person must (``track_reid_max_distance``)."""
+        re-identified person must (``track_reid_max_distance``); its keypoints are recorded as not seen when it
+        lies on the others more than ``track_backfill_keypoints_max_overlap`` (the model's guess at someone
+        mostly hidden)."""
+        config = self.config
         observation = self.observe(self._painted_over(image, others), region, image, others)
         if observation is None:
             return None
-        if (self._lies_on(observation, others, self.config.track_behind_max_overlap)
-                or not looks_like(track, observation, self.config.track_reid_max_distance)):
+        if (self._lies_on(observation, others, config.track_behind_max_overlap)
+                or not looks_like(track, observation, config.track_reid_max_distance)):
             return None
         self._written_keypoints(image, observation)
+        if self._lies_on(observation, others, config.track_backfill_keypoints_max_overlap):
+            observation.keypoints[:, 2] = 0.0
         self._record(track, observation, frame_id)
         track.looked_again.append(frame_id)
         return observation
