@@ -36,7 +36,8 @@ from glimpse.body.motion import SMPL_BODY_JOINTS
 from glimpse.cameras.align import umeyama
 from glimpse.errors import GlimpseError
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.objective import FitEnergy, FitState, Track, acceleration_energy, repeat_frames, speed_energy
+from glimpse.fit.objective import (FitEnergy, FitState, Track, acceleration_energy, motion_stride, repeat_frames,
+                                    speed_energy)
 from glimpse.fit.priors import pose_indices
 
 TORSO = ("left_shoulder", "right_shoulder", "left_hip", "right_hip")
@@ -226,14 +227,6 @@ def _scale(schedule: FitSchedule) -> list[str]:
 
 
 SCALE_CANDIDATES = np.geomspace(1e-3, 1e3, 121)  # world units per metre tried by _scale_from_motion
-
-
-def motion_stride(times_s: Tensor, rate_hz: float) -> int:
-    """Every how many frames a path sampled at ``times_s`` [T] (seconds) is about ``rate_hz`` apart (at least 1)."""
-    if len(times_s) < 2:
-        return 1
-    frame_rate = 1.0 / float(torch.median(times_s[1:] - times_s[:-1]).clamp(min=1e-9))
-    return max(1, round(frame_rate / rate_hz))
 
 
 def _scale_from_motion(energy: FitEnergy, state: FitState, rate_hz: float) -> float:

@@ -43,6 +43,7 @@ Every term is a sum over frames (not a mean), so the priors weigh less where key
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import torch
@@ -161,6 +162,14 @@ def speed_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, sigma_m_s: 
     return (keep * velocity.square().sum(-1)).sum() / sigma_m_s**2
 
 
+def motion_stride(times_s: Tensor, rate_hz: float) -> int:
+    """Every how many frames a path sampled at ``times_s`` [T] (seconds) is about ``rate_hz`` apart (at least 1)."""
+    if len(times_s) < 2:
+        return 1
+    frame_rate = 1.0 / float(torch.median(times_s[1:] - times_s[:-1]).clamp(min=1e-9))
+    return max(1, round(frame_rate / rate_hz))
+
+
 def speed_limit_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, limit_m_s: float, sigma_m_s: float,
                        span_s: float, max_gap_frames: int) -> Tensor:
     """Squared excess of the speed of points [T, 3] (metres) over ``limit_m_s``, over ``sigma_m_s``^2, summed
@@ -169,7 +178,7 @@ def speed_limit_energy(points: Tensor, times_s: Tensor, frame_ids: Tensor, limit
     frames of a fast video a fit's jitter of a few centimetres would read as speed."""
     if len(times_s) < 2:
         return points.new_zeros(())
-    step = max(1, int(round(span_s / float((times_s[1:] - times_s[:-1]).median()))))
+    step = motion_stride(times_s, 1.0 / span_s if span_s > 0 else math.inf)
     if len(times_s) <= step:
         step = len(times_s) - 1
     keep = ((frame_ids[step:] - frame_ids[:-step]) <= max_gap_frames).to(points.dtype)
