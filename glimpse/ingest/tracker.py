@@ -269,9 +269,7 @@ class Tracker:
             if looks_like(track, observation, config.track_follow_max_distance):
                 followed[track.index] = observation
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
-        for track in live:
-            if track.index in behind:
-                self._look_behind(image, followed, track)
+        self._look_behind_all(image, followed, [t for t in live if t.index in behind])
         fresh = self._find_new(image, list(followed.values()))
         self._reclaim(fresh, followed)
         assigned = self._assign(fresh, [t for t in live if t.index not in followed], frame_id)
@@ -391,10 +389,49 @@ class Tracker:
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
         return painted
 
-    def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> None:
-        """A track whose region slid onto, or overlaps, someone already found looks again with the found people
-        painted over (:meth:`_painted_over`) where they are nearer to their own skeleton than to the
-        track's expected one: the person hidden behind them, if still visible, is who remains."""
+    def _look_behind_all(self, image: np.ndarray, followed: dict[int, Observation], tracks: list[Track]) -> None:
+        """Each of ``tracks`` in turn looks behind the people ``followed`` this frame (:meth:`_look_behind`), the
+        people the tracks before it found there painted over too (the person behind the person found behind). A
+        track that finds nothing so, where others found someone, looks again past the people followed alone:
+        when it finds one of those finds, who looks like it better by more than ``track_reclaim_margin``, it takes
+        them (a walker passing someone who stands behind: both tracks' regions lie over the walker, and the first
+        to look would take them), and the track that lost them looks again."""
+        direct = dict(followed)
+        found: dict[int, Observation] = {}
+        for track in tracks:
+            observation = self._look_behind(image, followed, track)
+            if observation is None and found:
+                observation = self._take_from_others(image, direct, followed, found, track, tracks)
+            if observation is not None:
+                followed[track.index] = found[track.index] = observation
+
+    def _take_from_others(self, image: np.ndarray, direct: dict[int, Observation], followed: dict[int, Observation],
+                          found: dict[int, Observation], track: Track, tracks: list[Track]) -> Observation | None:
+        """What ``track`` finds behind the ``direct``ly followed people when that is one of the others' ``found``
+        and looks like ``track`` better by the reclaim margin (then the loser's find is dropped, and it looks
+        again with everything found painted over); else None."""
+        observation = self._look_behind(image, direct, track)
+        if observation is None:
+            return None
+        by_index = {t.index: t for t in tracks}
+        distance = appearance_distance(track.look, observation.look)
+        for other, find in found.items():
+            if (one_person(observation, find, self.config)
+                    and distance + self.config.track_reclaim_margin < appearance_distance(by_index[other].look,
+                                                                                          find.look)):
+                del found[other], followed[other]
+                followed[track.index] = observation
+                again = self._look_behind(image, followed, by_index[other])
+                if again is not None:
+                    followed[other] = found[other] = again
+                return observation
+        return None
+
+    def _look_behind(self, image: np.ndarray, followed: dict[int, Observation], track: Track) -> Observation | None:
+        """A track whose region slid onto, or overlaps, someone already ``followed`` looks again with the found
+        people painted over (:meth:`_painted_over`) where they are nearer to their own skeleton than to the
+        track's expected one: the person hidden behind them, if still visible, is who remains (returned; None
+        when nobody is, or they lie mostly on the people found or do not look like the track)."""
         found = list(followed.values())
         bodies = self._bodies(found, image.shape[:2])
         # pixels nearer to where this person should be than to anyone found stay
@@ -402,12 +439,10 @@ class Tracker:
         hidden = bodies & (np.min([observed_skeleton_distance(o) for o in found], axis=0) <= own)
         observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), image, hidden)
         if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap, bodies):
-            return
+            return None
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
         limit = self.config.track_reid_max_distance if track.missing else self.config.track_follow_max_distance
-        if not looks_like(track, observation, limit):
-            return
-        followed[track.index] = observation
+        return observation if looks_like(track, observation, limit) else None
 
     def _find_new(self, image: np.ndarray, observed: list[Observation]) -> list[Observation]:
         fresh: list[Observation] = []

@@ -1,0 +1,93 @@
+"""Who gets a person two tracks could claim when several look behind the people found. The landmark model is not run: the rules are what is tested; the whole ingest
+runs on rendered videos in test_ingest.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from glimpse.ingest.appearance import appearance_distance
+from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
+from glimpse.ingest.config import load_ingest_config
+from glimpse.ingest.crop import Region
+from glimpse.ingest.tracker import Observation, Track, Tracker
+
+BOX_HEIGHT = 80.0
+
+
+def _look(red: float) -> np.ndarray:
+    """An appearance (two halves of 4 bins) whose share of the first bin is ``red``."""
+    half = np.array([red, 1.0 - red, 0.0, 0.0])
+    return np.stack([half, half])
+
+
+def _observation(x: float, red: float) -> Observation:
+    """A standing person centred at column x (every landmark spread over a 2:1 box) who looks ``red``."""
+    points = np.stack([np.full(BODY_LANDMARKS, x) + np.linspace(-10.0, 10.0, BODY_LANDMARKS),
+                       np.linspace(20.0, 20.0 + BOX_HEIGHT, BODY_LANDMARKS)], 1)
+    region = Region(np.array([x, 60.0]), BOX_HEIGHT * REGION_GROW, 0.0)
+    landmarks = PoseLandmarks(points=points, visibility=np.ones(BODY_LANDMARKS), presence=np.ones(BODY_LANDMARKS),
+                              world=np.zeros((BODY_LANDMARKS, 3)), score=1.0, next_region=region,
+                              segmentation=np.zeros((LANDMARK_SIZE, LANDMARK_SIZE)), region=region)
+    keypoints = np.concatenate([points[:17], np.ones((17, 1))], 1)
+    return Observation(landmarks, None, None, np.array([x - 10.0, 20.0, x + 10.0, 20.0 + BOX_HEIGHT]), _look(red),
+                       1.0, keypoints)
+
+
+@pytest.fixture
+def tracker() -> Tracker:
+    tracker = Tracker.__new__(Tracker)
+    tracker.config = load_ingest_config()
+    tracker.pose, tracker.plate, tracker.tracks = None, None, []
+    return tracker
+
+
+def _track(index: int, x: float, red: float, missing: int = 0) -> Track:
+    return Track(index, _observation(x, red).landmarks, _look(red), missing=missing)
+
+
+@pytest.mark.parametrize("order", [(0, 1), (1, 0)])
+def test_a_person_found_behind_by_the_wrong_track_first_is_taken_back_by_their_own(
+        tracker: Tracker, order: tuple[int, int]) -> None:
+    """A walker passes in front of someone who stands behind the people followed; both tracks' regions lie over
+    the walker. Looking behind, a track finds the walker unless the walker is painted over (found already), then
+    the person standing; it keeps what it finds when that looks like it within the follow distance. Whichever
+    track looks first, the walker's track ends with the walker and the other with the person standing: the
+    standing person's track (looks 0.40 from the walker) may take the walker first, and loses them to the walker's
+    own (0.0 from them), then looks again and finds the person standing (0.29); the walker's track never keeps
+    the person standing (0.67)."""
+    walker_track, standing_track = _track(0, 100.0, 1.0), _track(1, 110.0, 0.7)
+    tracker.tracks = [walker_track, standing_track]
+    walker, standing = _observation(104.0, 1.0), _observation(112.0, 0.3)
+    limit = tracker.config.track_follow_max_distance
+    assert appearance_distance(walker_track.look, standing.look) > limit
+    assert appearance_distance(standing_track.look, walker.look) <= limit
+    assert appearance_distance(standing_track.look, standing.look) <= limit
+    looks: list[int] = []
+
+    def look_behind(image: np.ndarray, followed: dict[int, Observation], track: Track) -> Observation | None:
+        looks.append(track.index)
+        candidate = standing if any(o is walker for o in followed.values()) else walker
+        return candidate if appearance_distance(track.look, candidate.look) <= limit else None
+
+    tracker._look_behind = look_behind
+    followed: dict[int, Observation] = {}
+    tracker._look_behind_all(np.zeros((1, 1, 3)), followed, [tracker.tracks[i] for i in order])
+    assert sorted(followed) == [0, 1] and followed[0] is walker and followed[1] is standing
+    # the walker's track looking first: one look each; else the taking back costs two looks more
+    assert looks == ([0, 1] if order == (0, 1) else [1, 0, 0, 1])
+
+
+def test_two_finds_of_two_people_are_both_kept_with_one_look_each(tracker: Tracker) -> None:
+    tracker.tracks = [_track(0, 100.0, 0.9), _track(1, 300.0, 0.2)]
+    finds = {0: _observation(100.0, 0.9), 1: _observation(300.0, 0.2)}
+    looks: list[int] = []
+
+    def look_behind(image: np.ndarray, followed: dict[int, Observation], track: Track) -> Observation | None:
+        looks.append(track.index)
+        return finds[track.index]
+
+    tracker._look_behind = look_behind
+    followed: dict[int, Observation] = {}
+    tracker._look_behind_all(np.zeros((1, 1, 3)), followed, tracker.tracks)
+    assert sorted(followed) == [0, 1] and all(followed[i] is finds[i] for i in finds) and looks == [0, 1]
