@@ -1,4 +1,5 @@
-"""Who gets a person two tracks could claim when several look behind the people found. The landmark model is not run: the rules are what is tested; the whole ingest
+"""Who gets a person two tracks could claim when several look behind the people found, and which observations a
+track's appearance follows. The landmark model is not run: the rules are what is tested; the whole ingest
 runs on rendered videos in test_ingest.py."""
 
 from __future__ import annotations
@@ -91,3 +92,24 @@ def test_two_finds_of_two_people_are_both_kept_with_one_look_each(tracker: Track
     followed: dict[int, Observation] = {}
     tracker._look_behind_all(np.zeros((1, 1, 3)), followed, tracker.tracks)
     assert sorted(followed) == [0, 1] and all(followed[i] is finds[i] for i in finds) and looks == [0, 1]
+
+
+def test_a_fit_lying_on_someone_else_does_not_move_its_tracks_appearance(tracker: Tracker) -> None:
+    """A track followed onto a fit that lies half on the person in front keeps its appearance (the fit's mixes
+    both people's); a fit clear of the others moves it by ``appearance_update``."""
+    def boxed(observation: Observation, x0: int, x1: int) -> Observation:
+        mask = np.zeros((120, 400), bool)
+        mask[20:100, x0:x1] = True
+        observation.mask, observation.body = mask, mask
+        return observation
+
+    front = boxed(_observation(100.0, 0.2), 90, 110)
+    half_on_front = boxed(_observation(105.0, 0.6), 100, 120)  # 10 of its 20 columns on the person in front
+    clear = boxed(_observation(300.0, 0.6), 290, 310)
+    assert not tracker._clear_of(half_on_front, [front]) and tracker._clear_of(clear, [front])
+    assert tracker._clear_of(half_on_front, [])
+
+    for observation, moves in ((half_on_front, False), (clear, True)):
+        track = _track(0, observation.box[0] + 10.0, 1.0)
+        tracker._update(track, observation, 3, tracker._clear_of(observation, [front]))
+        assert track.frames == [3] and np.array_equal(track.look, _look(1.0)) != moves

@@ -77,6 +77,7 @@ class IngestConfig:
     hide_joints_on_others: bool
     appearance_bins: int
     appearance_update: float
+    appearance_update_max_overlap: float
     preview: bool
     checkpoint_frames: int
 

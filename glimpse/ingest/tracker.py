@@ -282,7 +282,8 @@ class Tracker:
                 track.missing += 1
                 continue
             self._written_keypoints(image, observation)
-            self._update(track, observation, frame_id)
+            others = [o for index, o in followed.items() if index != track.index]
+            self._update(track, observation, frame_id, self._clear_of(observation, others))
             result.append((track, observation))
         return result
 
@@ -546,7 +547,16 @@ class Tracker:
             pairs.append((track, observation))
         return pairs
 
-    def _update(self, track: Track, observation: Observation, frame_id: int) -> None:
+    def _clear_of(self, observation: Observation, others: list[Observation]) -> bool:
+        """Whether at most ``appearance_update_max_overlap`` of the observation's body pixels lie on the ``others``'
+        bodies (:meth:`_body_pixels`)."""
+        return not others or not self._lies_on(observation, self._bodies(others, observation.mask.shape),
+                                               self.config.appearance_update_max_overlap)
+
+    def _update(self, track: Track, observation: Observation, frame_id: int, clear: bool = True) -> None:
+        """Move the track on to ``observation`` (landmarks, velocity, suspected jumps) and record it; its
+        appearance follows the observation's only when ``clear`` (not lying on the other people found: the
+        appearance of a fit half on someone else mixes the two)."""
         config = self.config
         landmarks = observation.landmarks
         if track.frames:
@@ -558,7 +568,8 @@ class Tracker:
                 track.jumps.append(frame_id)
         track.landmarks = landmarks
         track.missing = 0
-        track.look = blend(track.look, observation.look, config.appearance_update)
+        if clear:
+            track.look = blend(track.look, observation.look, config.appearance_update)
         self._record(track, observation, frame_id)
 
     def _record(self, track: Track, observation: Observation, frame_id: int) -> None:
