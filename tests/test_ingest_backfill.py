@@ -13,7 +13,8 @@ from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
-from glimpse.ingest.tracker import Observation, Track, Tracker
+from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.tracker import Tracker
 
 SIZE = (120, 200)  # H, W of the frames
 BOX_HEIGHT = 60.0

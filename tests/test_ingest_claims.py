@@ -11,7 +11,8 @@ from glimpse.ingest.appearance import appearance_distance
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
-from glimpse.ingest.tracker import Observation, Track, Tracker
+from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.tracker import Tracker
 
 BOX_HEIGHT = 80.0
 

@@ -279,7 +279,7 @@ def _landmarks_at(points: np.ndarray, region: Region):
 
 def test_a_hidden_track_is_expected_where_its_velocity_takes_it() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
-    from glimpse.ingest.tracker import Track
+    from glimpse.ingest.observation import Track
 
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
     landmarks = _landmarks_at(np.tile([100.0, 100.0], (BODY_LANDMARKS, 1)), region)
@@ -291,7 +291,7 @@ def test_a_hidden_track_is_expected_where_its_velocity_takes_it() -> None:
 def test_a_second_wrong_fit_of_one_person_is_the_same_person_but_a_neighbour_is_not() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS, COCO17_FROM_BLAZEPOSE
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.tracker import same_person
+    from glimpse.ingest.observation import same_person
 
     config = load_ingest_config()
     region = Region(np.array([100.0, 150.0]), 200.0, 0.0)
@@ -311,7 +311,8 @@ def test_a_second_wrong_fit_of_one_person_is_the_same_person_but_a_neighbour_is_
 
 def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
-    from glimpse.ingest.tracker import Observation, Track, Tracker
+    from glimpse.ingest.observation import Observation, Track
+    from glimpse.ingest.tracker import Tracker
 
     def track(index: int, x: float) -> Track:
         region = Region(np.array([x, 100.0]), 80.0, 0.0)
@@ -333,7 +334,7 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.report import tracks_report
     from glimpse.ingest.stage import _kept_people
-    from glimpse.ingest.tracker import Track
+    from glimpse.ingest.observation import Track
 
     config = load_ingest_config()
     survey = SimpleNamespace(width=640, height=480, track_width=640, track_height=480, fps=10.0, static=True)
@@ -365,7 +366,8 @@ def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -
 
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.tracker import Observation, Track, Tracker
+    from glimpse.ingest.observation import Observation, Track
+    from glimpse.ingest.tracker import Tracker
 
     config = replace(load_ingest_config(), keypoint_crop_shifts=[])  # no model here to take the keypoints again
     region = Region(np.array([100.0, 100.0]), 80.0, 0.0)
@@ -389,7 +391,7 @@ def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -
 def test_a_checkpoint_round_trips_and_a_foreign_or_broken_one_is_not_used(tmp_path) -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.checkpoint import load_checkpoint, save_checkpoint
-    from glimpse.ingest.tracker import Track
+    from glimpse.ingest.observation import Track
 
     rng = np.random.default_rng(0)
     region = Region(np.array([100.0, 120.0]), 80.0, 0.3)
@@ -443,7 +445,8 @@ def test_foreground_blobs_of_people_side_by_side_are_also_looked_at_one_window_a
 def test_a_new_person_or_one_found_behind_someone_lying_mostly_on_them_is_not_taken() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.tracker import Observation, Tracker
+    from glimpse.ingest.observation import Observation
+    from glimpse.ingest.tracker import Tracker
 
     def observation(x: float, body: np.ndarray) -> Observation:
         region = Region(np.array([x, 50.0]), 80.0, 0.0)
@@ -472,7 +475,7 @@ def test_a_new_person_or_one_found_behind_someone_lying_mostly_on_them_is_not_ta
 def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bones_say_nearer() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.depth_order import depth_ordered_labels
-    from glimpse.ingest.tracker import Observation, Track
+    from glimpse.ingest.observation import Observation, Track
 
     shape = (120, 100)
 
@@ -494,7 +497,7 @@ def test_contested_mask_pixels_go_to_the_person_whose_feet_are_lower_or_whose_bo
 
 def test_feet_rank_people_by_their_recent_median_so_a_hidden_persons_guessed_feet_do_not_win() -> None:
     from glimpse.ingest.depth_order import nearness_rank
-    from glimpse.ingest.tracker import Observation, Track
+    from glimpse.ingest.observation import Observation, Track
 
     def track_with_feet(rows: list[float]) -> tuple[Track, Observation]:
         boxes = [np.array([0.0, 0.0, 10.0, row]) for row in rows]
@@ -542,7 +545,8 @@ def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the
 def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_that_tracks_person() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.tracker import Observation, Track, Tracker
+    from glimpse.ingest.observation import Observation, Track
+    from glimpse.ingest.tracker import Tracker
 
     def look(red: float) -> np.ndarray:  # two halves of 4 bins, normalised
         half = np.array([red, 1.0 - red, 0.0, 0.0])
@@ -664,7 +668,7 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.occlusion import joints_on_others
     from glimpse.ingest.stage import _kept_people
-    from glimpse.ingest.tracker import Track
+    from glimpse.ingest.observation import Track
 
     labels = np.zeros((60, 80), np.uint16)
     labels[10:30, 20:40] = 2  # a nearer person (track index 1) in front

@@ -24,7 +24,8 @@ import numpy as np
 
 from glimpse.ingest.blazepose import REGION_GROW
 from glimpse.ingest.crop import Region, region_around_box
-from glimpse.ingest.tracker import Observation, Track, Tracker
+from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.tracker import Tracker
 
 
 @dataclass(frozen=True)

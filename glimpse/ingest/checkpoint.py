@@ -21,7 +21,7 @@ import numpy as np
 from glimpse.ingest.blazepose import PoseLandmarks
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region
-from glimpse.ingest.tracker import Track
+from glimpse.ingest.observation import Track
 
 log = logging.getLogger("glimpse")
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from glimpse.ingest.tracker import Observation, Track, observed_skeleton_distance
+from glimpse.ingest.observation import Observation, Track, observed_skeleton_distance
 
 
 def nearness_rank(track: Track, observation: Observation, cue: str, frames: int) -> float:

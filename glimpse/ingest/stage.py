@@ -51,7 +51,8 @@ from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
 from glimpse.ingest.occlusion import joints_on_others
-from glimpse.ingest.tracker import Track, Tracker
+from glimpse.ingest.observation import Track
+from glimpse.ingest.tracker import Tracker
 from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
