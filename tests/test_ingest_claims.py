@@ -4,6 +4,8 @@ runs on rendered videos in test_ingest.py."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -114,3 +116,46 @@ def test_a_fit_lying_on_someone_else_does_not_move_its_tracks_appearance(tracker
         track = _track(0, observation.box[0] + 10.0, 1.0)
         tracker._update(track, observation, 3, tracker._clear_of(observation, [front]))
         assert track.frames == [3] and np.array_equal(track.look, _look(1.0)) != moves
+
+
+class _RecordingModel:
+    """A landmark model that records the images it is given and finds ``found`` in each."""
+
+    def __init__(self, found: PoseLandmarks):
+        self.found, self.images = found, []
+
+    def landmarks(self, image: np.ndarray, region: Region, refine: bool = True, mirror: bool = False) -> PoseLandmarks:
+        self.images.append(image)
+        return self.found
+
+
+def _on_canvas(observation: Observation, x0: int, x1: int) -> Observation:
+    """The observation's mask and body: columns x0..x1 of rows 20..100 of a 120x400 black frame."""
+    mask = np.zeros((120, 400), bool)
+    mask[20:100, x0:x1] = True
+    observation.mask, observation.body = mask, mask
+    observation.image = np.zeros((120, 400, 3), np.uint8)
+    return observation
+
+
+def test_the_written_keypoints_see_the_other_people_painted_over(tracker: Tracker) -> None:
+    """At a crossing the landmark runs that give a person's written keypoints see the other people found painted
+    over by the plate where they are nearer to their own skeleton than to this person's; this person's own
+    pixels stay, and the keypoints are the run's on the painted frame. Someone outside the person's region is
+    not painted, and the model is not run again."""
+    tracker.config = replace(tracker.config, keypoint_crop_shifts=[], keypoints_paint_others=True)
+    tracker.plate = np.full((120, 400, 3), 255, np.uint8)
+    person, beside = _on_canvas(_observation(100.0, 0.5), 90, 110), _on_canvas(_observation(150.0, 0.5), 140, 160)
+    moved = replace(person.landmarks, points=person.landmarks.points + 3.0)
+    tracker.model = _RecordingModel(moved)
+    tracker._written_keypoints(person.image, person, [beside])
+    (seen,) = tracker.model.images
+    assert (seen[beside.mask] == 255).all() and (seen[person.mask] == 0).all()
+    assert np.allclose(person.keypoints[:, :2], moved.coco17()[0])
+
+    far = _on_canvas(_observation(330.0, 0.5), 320, 340)
+    alone = _on_canvas(_observation(100.0, 0.5), 90, 110)
+    before = alone.keypoints.copy()
+    tracker.model = _RecordingModel(moved)
+    tracker._written_keypoints(alone.image, alone, [far])
+    assert tracker.model.images == [] and np.array_equal(alone.keypoints, before)

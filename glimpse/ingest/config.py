@@ -62,6 +62,7 @@ class IngestConfig:
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
     keypoint_crop_shifts: list[float]
+    keypoints_paint_others: bool
     fit_size_sigma: float
     fit_keypoint_noise_m: float
     fit_unseen_limbs_at_rest: bool

@@ -41,7 +41,15 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
-from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, REGION_GROW, BlazePose, Detections, box_iou, weighted_nms
+from glimpse.ingest.blazepose import (
+    COCO17_FROM_BLAZEPOSE,
+    REGION_GROW,
+    BlazePose,
+    Detections,
+    PoseLandmarks,
+    box_iou,
+    weighted_nms,
+)
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
 from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
@@ -151,25 +159,54 @@ class Tracker:
             if observation is None:
                 track.missing += 1
                 continue
-            self._written_keypoints(image, observation)
             others = [o for index, o in followed.items() if index != track.index]
+            self._written_keypoints(image, observation, others)
             self._update(track, observation, frame_id, self._clear_of(observation, others))
             result.append((track, observation))
         return result
 
-    def _written_keypoints(self, image: np.ndarray, observation: Observation) -> None:
+    def _written_keypoints(self, image: np.ndarray, observation: Observation,
+                           others: list[Observation] | None = None) -> None:
         """Set the keypoints the scene gets: the user's pose model's, or the median of BlazePose's runs over
-        shifted crops (``keypoint_crop_shifts``), else the observation's own."""
+        shifted crops (``keypoint_crop_shifts``), else the observation's own. With ``keypoints_paint_others``,
+        BlazePose's runs see the ``others`` found in the frame painted over (:meth:`_without_others`): at a
+        crossing the model takes the other person's legs for this one's."""
         config = self.config
         if self.pose is not None:
             points, scores = self.pose(image, observation.box)
             observation.keypoints = np.concatenate([points, np.clip(scores, 0.0, 1.0)[:, None]], 1)
             observation.legs_disputed = 0.0  # BlazePose's runs say nothing about another model's names
-        elif config.keypoint_crop_shifts:
+            return
+        source, landmarks = observation.image, observation.landmarks
+        if config.keypoints_paint_others and others:
+            source, landmarks = self._without_others(observation, others)
+        if config.keypoint_crop_shifts:
             median, observation.legs_disputed = self.model.median_points(
-                observation.image, observation.landmarks, tuple(config.keypoint_crop_shifts),
-                config.landmark_refine_heatmap, config.landmark_flip_average)
+                source, landmarks, tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
+                config.landmark_flip_average)
             observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
+        elif landmarks is not observation.landmarks:
+            observation.keypoints[:, :2] = landmarks.coco17()[0]
+            observation.legs_disputed = landmarks.legs_disputed
+
+    def _without_others(self, observation: Observation, others: list[Observation]) -> tuple[np.ndarray, PoseLandmarks]:
+        """(image, landmarks): the observation's image with the ``others``' body pixels nearer to their own skeleton
+        than to the observation's painted over (:meth:`_painted_over`), and the landmark model's run on it in the
+        observation's region; the observation's own image and landmarks when no such pixel lies in the region or the
+        model finds nobody there once they are painted."""
+        bodies = self._bodies(others, observation.mask.shape)
+        nearer = np.min([observed_skeleton_distance(o) for o in others], axis=0)
+        theirs = bodies & (nearer <= observed_skeleton_distance(observation))
+        x0, y0, x1, y1 = np.round(observation.landmarks.region.box()).astype(int)
+        height, width = theirs.shape
+        if not theirs[max(y0, 0):min(y1, height), max(x0, 0):min(x1, width)].any():
+            return observation.image, observation.landmarks
+        painted = self._painted_over(observation.image, theirs)
+        landmarks = self.model.landmarks(painted, observation.landmarks.region, self.config.landmark_refine_heatmap,
+                                         self.config.landmark_flip_average)
+        if landmarks.score < self.config.landmark_min_presence:
+            return observation.image, observation.landmarks
+        return painted, landmarks
 
     def look_again(self, image: np.ndarray, region: Region, others: np.ndarray, track: Track, frame_id: int
                    ) -> Observation | None:
