@@ -13,7 +13,7 @@ from glimpse.ingest.appearance import appearance_distance
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
-from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.observation import Observation, Track, observed_skeleton_distance
 from glimpse.ingest.tracker import Tracker
 
 BOX_HEIGHT = 80.0
@@ -159,3 +159,24 @@ def test_the_written_keypoints_see_the_other_people_painted_over(tracker: Tracke
     tracker.model = _RecordingModel(moved)
     tracker._written_keypoints(alone.image, alone, [far])
     assert tracker.model.images == [] and np.array_equal(alone.keypoints, before)
+
+
+@pytest.mark.parametrize("in_front", [True, False])
+def test_a_person_in_front_keeps_their_own_pixels_where_someone_behind_overlaps(tracker: Tracker,
+                                                                                 in_front: bool) -> None:
+    """Pixels on both people's bodies and nearer to the other's skeleton are painted for the person behind, whose
+    view the other hides, and spared for the person in front, whose body they are; the other's pixels off this
+    person's body are painted either way."""
+    tracker.config = replace(tracker.config, keypoint_crop_shifts=[], keypoints_paint_others=True)
+    tracker.plate = np.full((120, 400, 3), 255, np.uint8)
+    person, other = _on_canvas(_observation(100.0, 0.5), 90, 140), _on_canvas(_observation(150.0, 0.5), 130, 160)
+    tracker.model = _RecordingModel(person.landmarks)
+    tracker._written_keypoints(person.image, person, [other], [in_front])
+    (seen,) = tracker.model.images
+    nearer_other = observed_skeleton_distance(other) <= observed_skeleton_distance(person)
+    shared, only_other = person.mask & other.mask & nearer_other, other.mask & ~person.mask & nearer_other
+    region = np.zeros_like(person.mask)
+    x0, _, x1, _ = np.round(person.landmarks.region.box()).astype(int)
+    region[:, max(x0, 0):x1] = True
+    assert shared.any() and (only_other & region).any()
+    assert (seen[only_other] == 255).all() and (seen[shared] == (0 if in_front else 255)).all()

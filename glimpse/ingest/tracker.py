@@ -51,6 +51,7 @@ from glimpse.ingest.blazepose import (
     weighted_nms,
 )
 from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
 from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
 from glimpse.ingest.observation import (
@@ -160,17 +161,27 @@ class Tracker:
                 track.missing += 1
                 continue
             others = [o for index, o in followed.items() if index != track.index]
-            self._written_keypoints(image, observation, others)
+            self._written_keypoints(image, observation, others, self._in_front_of(track, observation, followed))
             self._update(track, observation, frame_id, self._clear_of(observation, others))
             result.append((track, observation))
         return result
 
+    def _in_front_of(self, track: Track, observation: Observation, followed: dict[int, Observation]) -> list[bool]:
+        """Per other person found this frame (``followed``'s order less ``track``): whether this one is nearer the
+        camera (:func:`nearness_rank`, the cue of the depth-ordered masks, over the tracks' frames before this one)."""
+        tracks = {t.index: t for t in self.tracks}
+        config = self.config
+        mine = nearness_rank(track, observation, config.mask_depth_cue, config.mask_depth_frames)
+        return [mine < nearness_rank(tracks[index], other, config.mask_depth_cue, config.mask_depth_frames)
+                for index, other in followed.items() if index != track.index]
+
     def _written_keypoints(self, image: np.ndarray, observation: Observation,
-                           others: list[Observation] | None = None) -> None:
+                           others: list[Observation] | None = None, in_front: list[bool] | None = None) -> None:
         """Set the keypoints the scene gets: the user's pose model's, or the median of BlazePose's runs over
         shifted crops (``keypoint_crop_shifts``), else the observation's own. With ``keypoints_paint_others``,
-        BlazePose's runs see the ``others`` found in the frame painted over (:meth:`_without_others`): at a
-        crossing the model takes the other person's legs for this one's."""
+        BlazePose's runs see the ``others`` found in the frame painted over (:meth:`_without_others`; ``in_front``:
+        per other, whether this person is nearer): at a crossing the model takes the other person's legs for this
+        one's."""
         config = self.config
         if self.pose is not None:
             points, scores = self.pose(image, observation.box)
@@ -179,7 +190,7 @@ class Tracker:
             return
         source, landmarks = observation.image, observation.landmarks
         if config.keypoints_paint_others and others:
-            source, landmarks = self._without_others(observation, others)
+            source, landmarks = self._without_others(observation, others, in_front or [False] * len(others))
         if config.keypoint_crop_shifts:
             median, observation.legs_disputed = self.model.median_points(
                 source, landmarks, tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
@@ -189,14 +200,19 @@ class Tracker:
             observation.keypoints[:, :2] = landmarks.coco17()[0]
             observation.legs_disputed = landmarks.legs_disputed
 
-    def _without_others(self, observation: Observation, others: list[Observation]) -> tuple[np.ndarray, PoseLandmarks]:
+    def _without_others(self, observation: Observation, others: list[Observation], in_front: list[bool]
+                        ) -> tuple[np.ndarray, PoseLandmarks]:
         """(image, landmarks): the observation's image with the ``others``' body pixels nearer to their own skeleton
-        than to the observation's painted over (:meth:`_painted_over`), and the landmark model's run on it in the
-        observation's region; the observation's own image and landmarks when no such pixel lies in the region or the
-        model finds nobody there once they are painted."""
-        bodies = self._bodies(others, observation.mask.shape)
-        nearer = np.min([observed_skeleton_distance(o) for o in others], axis=0)
-        theirs = bodies & (nearer <= observed_skeleton_distance(observation))
+        than to the observation's painted over (:meth:`_painted_over`), less the observation's own body pixels
+        where it is ``in_front`` of that other person (per other: their body does not hide this one's), and the
+        landmark model's run on it in the observation's region; the observation's own image and landmarks when no
+        such pixel lies in the region or the model finds nobody there once they are painted."""
+        own_distance = observed_skeleton_distance(observation)
+        own_body = self._body_pixels(observation)
+        theirs = np.zeros(observation.mask.shape, bool)
+        for other, spare_own in zip(others, in_front):
+            pixels = self._body_pixels(other) & (observed_skeleton_distance(other) <= own_distance)
+            theirs |= pixels & ~own_body if spare_own else pixels
         x0, y0, x1, y1 = np.round(observation.landmarks.region.box()).astype(int)
         height, width = theirs.shape
         if not theirs[max(y0, 0):min(y1, height), max(x0, 0):min(x1, width)].any():
