@@ -51,8 +51,8 @@ from glimpse.ingest.blazepose import (
     weighted_nms,
 )
 from glimpse.ingest.config import IngestConfig
-from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.crop import Region, paste_to_image, region_around_box
+from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
 from glimpse.ingest.observation import (
     MID_HIPS,
@@ -155,25 +155,26 @@ class Tracker:
         for track, observation in assigned:
             followed[track.index] = observation
         result = []
+        nearness = self._nearness(followed)
         for track in self.tracks:
             observation = followed.get(track.index)
             if observation is None:
                 track.missing += 1
                 continue
             others = [o for index, o in followed.items() if index != track.index]
-            self._written_keypoints(image, observation, others, self._in_front_of(track, observation, followed))
+            in_front = [nearness[track.index] < nearness[index] for index in followed if index != track.index]
+            self._written_keypoints(image, observation, others, in_front)
             self._update(track, observation, frame_id, self._clear_of(observation, others))
             result.append((track, observation))
         return result
 
-    def _in_front_of(self, track: Track, observation: Observation, followed: dict[int, Observation]) -> list[bool]:
-        """Per other person found this frame (``followed``'s order less ``track``): whether this one is nearer the
-        camera (:func:`nearness_rank`, the cue of the depth-ordered masks, over the tracks' frames before this one)."""
+    def _nearness(self, followed: dict[int, Observation]) -> dict[int, float]:
+        """Track index -> :func:`nearness_rank` of its person found this frame (smaller = nearer the camera; the cue
+        of the depth-ordered masks, over the track's frames before this one)."""
         tracks = {t.index: t for t in self.tracks}
         config = self.config
-        mine = nearness_rank(track, observation, config.mask_depth_cue, config.mask_depth_frames)
-        return [mine < nearness_rank(tracks[index], other, config.mask_depth_cue, config.mask_depth_frames)
-                for index, other in followed.items() if index != track.index]
+        return {index: nearness_rank(tracks[index], observation, config.mask_depth_cue, config.mask_depth_frames)
+                for index, observation in followed.items()}
 
     def _written_keypoints(self, image: np.ndarray, observation: Observation,
                            others: list[Observation] | None = None, in_front: list[bool] | None = None) -> None:
