@@ -41,18 +41,11 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
-from glimpse.ingest.blazepose import (
-    COCO17_FROM_BLAZEPOSE,
-    REGION_GROW,
-    BlazePose,
-    Detections,
-    PoseLandmarks,
-    box_iou,
-    weighted_nms,
-)
+from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, BlazePose, PoseLandmarks, box_iou
 from glimpse.ingest.config import IngestConfig
-from glimpse.ingest.crop import Region, paste_to_image, region_around_box
+from glimpse.ingest.crop import Region, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
+from glimpse.ingest.detection import detector_regions
 from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
 from glimpse.ingest.observation import (
     MID_HIPS,
@@ -73,25 +66,6 @@ UNMATCHED = 1e6  # assignment cost of a pair that must not match
 SAME_REGION_IOU = 0.9  # a foreground region this close (IoU) to one looked at in an earlier round is not looked again
 STILL_WIDTH = 0.02  # fraction of the frame's height: where the plate shows a found person in a region at least
 # this wide, they stood still (specks where their colour matches the background's are painted by the plate)
-
-
-def detector_regions(model: BlazePose, image: np.ndarray, config: IngestConfig,
-                     detector: OnnxDetector | None = None) -> list[Region]:
-    """Landmark regions of the detected people: the user's ONNX detector's boxes, or BlazePose's detector on the
-    whole frame and on ``detect_tiles``^2 overlapping tiles."""
-    if detector is not None:
-        boxes, _ = detector(image)
-        return [region_around_box(box, REGION_GROW) for box in boxes]
-    height, width = image.shape[:2]
-    crops = [Region(np.array([(width - 1) / 2, (height - 1) / 2]), float(max(width, height)), 0.0)]
-    tiles = config.detect_tiles
-    if tiles > 1:
-        side = max(width, height) / tiles * (1 + config.detect_tile_overlap)
-        for cy in np.linspace(side / 2, height - side / 2, tiles) if height > side else [(height - 1) / 2]:
-            for cx in np.linspace(side / 2, width - side / 2, tiles) if width > side else [(width - 1) / 2]:
-                crops.append(Region(np.array([cx, cy]), side, 0.0))
-    found = [model.detect(image, crop, config.detect_min_score) for crop in crops]
-    return weighted_nms(Detections.concatenate(found), config.detect_nms_iou).regions()
 
 
 class Tracker:
