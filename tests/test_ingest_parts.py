@@ -327,7 +327,7 @@ def test_only_unseen_tracks_overlapping_someone_found_look_behind() -> None:
     assert tracker._hidden_by_others(live, {}) == set()
 
 
-def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
+def test_tracks_too_short_too_small_or_upside_down_are_dropped_and_counted() -> None:
     from types import SimpleNamespace
 
     from glimpse.ingest.blazepose import BODY_LANDMARKS
@@ -354,11 +354,40 @@ def test_tracks_too_short_or_too_small_are_dropped_and_counted() -> None:
     short = track(2, config.track_min_frames - 1, 0.5 * 480)
     filled_up = track(3, config.track_min_frames + 1, 0.5 * 480)  # long enough only with two frames looked at again
     filled_up.looked_again = [0, 1]
-    people, dropped = _kept_people([tall, small, short, filled_up], survey, config,
+    standing = np.zeros((17, 3))
+    standing[:, 2] = 1.0
+    standing[[5, 6], 1], standing[[11, 12], 1] = 100.0, 200.0  # shoulders above the hips (image y down)
+    on_its_head = standing.copy()
+    on_its_head[:, 1] = 300.0 - standing[:, 1]
+    frames = 10
+    upside_down = track(4, frames, 0.5 * 480)  # a pattern on a wall, on its head in every frame showing its torso
+    upside_down.keypoints = [on_its_head] * (frames - 2) + [np.zeros((17, 3))] * 2
+    handstand = track(5, frames, 0.5 * 480)  # on its hands in fewer frames than the limit allows
+    inverted = int(config.track_max_upside_down * frames)
+    handstand.keypoints = [on_its_head] * inverted + [standing] * (frames - inverted)
+    people, dropped = _kept_people([tall, small, short, filled_up, upside_down, handstand], survey, config,
                                    lambda frame_id: np.zeros((480, 640), np.uint16))
-    assert [p.label for p in people] == [1] and dropped == {"short": 2, "small": 1}
+    assert [p.label for p in people] == [1, 6] and dropped == {"short": 2, "small": 1, "upside_down": 1}
     report = tracks_report(people, dropped, {})
     assert report["dropped_short_tracks"] == 2 and report["dropped_small_tracks"] == 1
+    assert report["dropped_upside_down_tracks"] == 1
+
+
+def test_upside_down_share_counts_only_frames_showing_the_torso() -> None:
+    from glimpse.ingest.upright import upside_down_share
+
+    def frame(shoulder_xy: tuple[float, float], hip_xy: tuple[float, float], seen: float = 1.0) -> np.ndarray:
+        keypoints = np.zeros((17, 3))
+        keypoints[[5, 6], :2], keypoints[[11, 12], :2] = shoulder_xy, hip_xy
+        keypoints[[5, 6, 11, 12], 2] = seen
+        return keypoints
+
+    upright, on_its_head = frame((50, 10), (50, 60)), frame((50, 60), (50, 10))
+    lying = frame((100, 50), (50, 50))  # torso level: 90 degrees from up
+    tilted_down = frame((60, 60), (50, 10))  # 169 degrees from up
+    unseen = frame((50, 60), (50, 10), seen=0.0)
+    assert upside_down_share(np.stack([upright, on_its_head, lying, tilted_down, unseen])) == 0.5
+    assert upside_down_share(np.stack([unseen])) == 0.0
 
 
 def test_a_track_does_not_follow_onto_someone_who_looks_different(monkeypatch) -> None:

@@ -44,6 +44,7 @@ class IngestConfig:
     track_backfill_keypoints_max_overlap: float
     track_min_frames: int
     track_min_height: float
+    track_max_upside_down: float
     track_switch_distance: float
     foreground_threshold: int
     foreground_min_area: float

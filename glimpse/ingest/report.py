@@ -96,7 +96,7 @@ def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],
         }
     return {"format": REPORT_FORMAT, **facts, "people": persons, "dropped_short_tracks": dropped["short"],
-            "dropped_small_tracks": dropped["small"]}
+            "dropped_small_tracks": dropped["small"], "dropped_upside_down_tracks": dropped["upside_down"]}
 
 
 def report_table(report: dict) -> str:

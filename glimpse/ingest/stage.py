@@ -54,6 +54,7 @@ from glimpse.ingest.occlusion import joints_on_others
 from glimpse.ingest.observation import Track
 from glimpse.ingest.tracker import Tracker
 from glimpse.ingest.truncation import squeezed_at_border
+from glimpse.ingest.upright import upside_down_share
 from glimpse.io.images import frame_name
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
@@ -109,15 +110,19 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
 def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                  labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames (not counting frames looked at again) whose box is usually
-    (median over their frames) at least ``track_min_height`` of the frame's height, named p0, p1, ... in order of
+    (median over their frames) at least ``track_min_height`` of the frame's height and upside down in at most
+    ``track_max_upside_down`` of the frames showing their torso (glimpse.ingest.upright), named p0, p1, ... in order of
     first appearance, their keypoints' left and right (and their legs', on a static camera) made consistent along
     the track (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on another person's pixels
     of ``labels_of(frame id)``, the tracking-size labels) written as not seen, smoothed over time and, with their
     boxes, in scene pixels; and how many tracks were dropped, by reason."""
     long_enough = [t for t in tracks if len(t.frames) - len(t.looked_again) >= config.track_min_frames]
-    kept = sorted((t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height),
+    large_enough = [t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height]
+    kept = sorted((t for t in large_enough
+                   if upside_down_share(np.stack(t.keypoints)) <= config.track_max_upside_down),
                   key=lambda t: (t.frames[0], t.index))
-    dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(kept)}
+    dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(large_enough),
+               "upside_down": len(large_enough) - len(kept)}
     people = []
     for k, track in enumerate(kept):
         frames, track_boxes = np.array(track.frames), np.stack(track.boxes)  # boxes at the tracking size
@@ -296,8 +301,10 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
     if not people:
         raise GlimpseError(f"{video}: no person found in {len(survey.chosen)} frames (BlazePose saw nobody for "
                            f"{config.track_min_frames} frames or more at {config.track_min_height:g} of the frame's "
-                           "height or taller: ingest.track_min_frames, track_min_height); Glimpse reconstructs "
-                           "people, so it needs a video with at least one person in view")
+                           "height or taller: ingest.track_min_frames, track_min_height)"
+                           + (f"; {dropped['upside_down']} track(s) stood upside down (a video turned over without "
+                              "rotation metadata? ingest.track_max_upside_down)" if dropped["upside_down"] else "")
+                           + "; Glimpse reconstructs people, so it needs a video with at least one person in view")
     if survey.focal_35mm is not None:  # a moving camera's too: SfM keeps it (01_sfm.estimate_focal: its own)
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
