@@ -14,7 +14,8 @@ single view tells: glimpse.fit.evaluate.scene_scale_errors) and after one simila
 distance errors, depth order agreement (glimpse.fit.evaluate), and how the metric 3D keypoints themselves
 compare with the true body's (turned onto each frame's viewing ray as stage 02 does); then the common floor
 against the true one (glimpse.fit.evaluate.floor_errors: its tilt, split into the camera's pitch and roll, and
-the camera's height above it).
+the camera's height above it); and who hides whom where two people's skeletons overlap in the image, as their
+ingested masks say it (glimpse.fit.evaluate.front_by_masks), against the fitted and the true depth order.
 
     python bench/fit_ingested.py [--scenarios demo,adult_child] [--seed 0] [--work DIR]
                                  [--variants 2d,3d-size,3d-fitted] [--params "02_smpl_fit.key=value ..."]
@@ -37,17 +38,28 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ingest import fixture_video, found_people, true_people  # noqa: E402  (bench/ingest.py, beside this file)
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
+from glimpse.body.model_file import SMPL_PARENTS  # noqa: E402
+from glimpse.body.params import BodyParams  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import floor_errors, joint_errors, placement_errors, scene_scale_errors  # noqa: E402
+from glimpse.fit.evaluate import (  # noqa: E402
+    body_joints,
+    floor_errors,
+    front_by_masks,
+    joint_errors,
+    placement_errors,
+    scene_scale_errors,
+    true_joints,
+)
 from glimpse.fit.stage import Fitter, onto_viewing_rays  # noqa: E402
 from glimpse.fixtures.scenes import FREE_BODY  # noqa: E402
 from glimpse.ingest.config import load_ingest_config  # noqa: E402
 from glimpse.ingest.evaluate import match_frame  # noqa: E402
 from glimpse.ingest.stage import ingest  # noqa: E402
 from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
+from glimpse.io.images import read_mask  # noqa: E402
 from glimpse.scene import load_scene, read_keypoints2d  # noqa: E402
 
 SIZE = "hd"
@@ -58,6 +70,9 @@ HIPS = (11, 12)  # COCO-17
 VARIANTS = {"2d": ("no", False, "model"), "3d-size": ("its size", True, "model"),
             "3d-fitted": ("size fitted", True, "fitted")}
 TRUE_UP, TRUE_FLOOR_HEIGHT = np.array([0.0, 1.0, 0.0]), 0.0  # the fixtures' world: y up, the floor at y = 0
+# who hides whom from the masks (glimpse.fit.evaluate.front_by_masks): skeletons drawn 0.15 torso lengths wide,
+# overlapping in at least 50 pixels, one mask covering at least half of the overlap and the other at most half as much
+MASK_ORDER = {"radius_torsos": 0.15, "min_pixels": 50, "min_share": 0.5, "max_minority": 0.5}
 
 
 def ingested_scene(scenario: str, seed: int, work: Path) -> tuple[Path, Path]:
@@ -107,6 +122,42 @@ def metric_keypoint_errors(model: BodyModel, scene: Path, truth_dir: Path, ids: 
     return {"relative3d_error_m": float(np.concatenate(errors).mean()), "relative3d_size_ratio": float(np.mean(ratios))}
 
 
+def mask_order(model: BodyModel, fitted: dict[str, BodyParams], truths: dict[str, dict[str, np.ndarray]],
+               masks: dict[str, dict[int, Path]], cameras: dict) -> dict[str, int]:
+    """Over every pair of people and frame both were fitted in: how many pair-frames the masks decide (who is in
+    front where the fitted skeletons overlap), and of those how many the fitted and the true pelvis depths (along
+    the camera's axis) put in the same order as the masks, and how many the fitted order agrees with the truth."""
+    pelvis_depth, points = {}, {}
+    for pid, params in fitted.items():
+        keep = ~params.interpolated
+        ours = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
+                           params.transl[keep], params.scale)
+        true = true_joints(model, params, truths[pid])
+        for frame, joints, truth in zip(params.frame_ids[keep], ours, true):
+            camera = cameras[int(frame)]
+            pixels, depth = camera.project(joints)
+            points[pid, int(frame)] = pixels
+            pelvis_depth[pid, int(frame)] = (depth[0], camera.project(truth[:1])[1][0])
+    counts = {"decided": 0, "fitted_as_masks": 0, "true_as_masks": 0, "fitted_as_true": 0}
+    pids = sorted(fitted)
+    for k, a in enumerate(pids):
+        for b in pids[k + 1:]:
+            for frame in sorted({f for p, f in points if p == a} & {f for p, f in points if p == b}):
+                if frame not in masks[a] or frame not in masks[b]:
+                    continue
+                front = front_by_masks(points[a, frame], points[b, frame], read_mask(masks[a][frame]) > 0,
+                                       read_mask(masks[b][frame]) > 0, SMPL_PARENTS, **MASK_ORDER)
+                if front is None:
+                    continue
+                (fitted_a, true_a), (fitted_b, true_b) = pelvis_depth[a, frame], pelvis_depth[b, frame]
+                masks_a_nearer, fitted_a_nearer, true_a_nearer = front == 0, fitted_a < fitted_b, true_a < true_b
+                counts["decided"] += 1
+                counts["fitted_as_masks"] += fitted_a_nearer == masks_a_nearer
+                counts["true_as_masks"] += true_a_nearer == masks_a_nearer
+                counts["fitted_as_true"] += fitted_a_nearer == true_a_nearer
+    return counts
+
+
 def floor_row(floor: dict, cameras: dict) -> dict:
     """The common floor's errors (glimpse.fit.evaluate.floor_errors) in the first frame's camera; {} without one."""
     if not floor.get("applied") or "normal" not in floor:
@@ -140,11 +191,13 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel, variants: list[s
         scene_scale, scene_scaled = scene_scale_errors(model, fitted, truths, centres)
         frames = sum(int((~fit.interpolated).sum()) for fit in fitted.values())
         on_floor = floor_row(floor, cameras)
+        found_masks = {ids[person.pid]: person.masks for person in people}
+        order = mask_order(model, fitted, truths, found_masks, cameras)
         for pid, fit in sorted(fitted.items()):
             rows.append({"scenario": scenario, "person": pid, "variant": variant, "floor": floor["applied"],
                          "seconds_per_100_frames": 100 * seconds / frames, **placement, **metric,
                          **joint_errors(model, fit, truths[pid]), "floor_errors": on_floor,
-                         "scene_scale": scene_scale, "scene_scaled_m": scene_scaled[pid]})
+                         "scene_scale": scene_scale, "scene_scaled_m": scene_scaled[pid], "mask_order": order})
     return rows
 
 
@@ -192,6 +245,16 @@ def main() -> None:
         cells = (f"{f['tilt_deg']:.1f} | {f['pitch_error_deg']:+.1f} | {f['roll_error_deg']:+.1f} | "
                  f"{100 * f['camera_height_error_m']:+.0f}") if f else "no floor | - | - | -"
         print(f"| {r['scenario']} | {r['variant']} | {cells} |")
+
+    print("\nWho hides whom, from the ingested masks where two fitted skeletons overlap (pair-frames), against the "
+          "fitted and the true depth order\n")
+    print("| scene | metric 3D | pair-frames the masks decide | fitted order as the masks | true order as the masks | "
+          "fitted order as the truth there |")
+    print("|---|---|---|---|---|---|")
+    for r in {(r["scenario"], r["variant"]): r for r in rows}.values():
+        o = r["mask_order"]
+        print(f"| {r['scenario']} | {r['variant']} | {o['decided']} | {o['fitted_as_masks']} | {o['true_as_masks']} | "
+              f"{o['fitted_as_true']} |")
 
 
 if __name__ == "__main__":

@@ -307,6 +307,33 @@ def test_a_body_moved_by_a_similarity_is_moved_back_onto_the_truth(model):
     assert errors["mpjpe_m"] == pytest.approx(errors["sequence_aligned_m"], rel=1e-6)
 
 
+def test_the_masks_put_in_front_whoever_owns_the_overlap_of_two_skeletons():
+    """front_by_masks: two upright skeletons side by side overlap in a band; the person whose mask covers the band
+    is in front; masks that share it, or skeletons that do not overlap, tell nothing."""
+    from glimpse.body.model_file import SMPL_PARENTS
+    from glimpse.fit.evaluate import front_by_masks
+
+    def skeleton(x: float) -> np.ndarray:  # every joint on one vertical line, the neck 60 px above the pelvis
+        points = np.zeros((len(SMPL_PARENTS), 2))
+        points[:, 0], points[:, 1] = x, np.linspace(40.0, 160.0, len(SMPL_PARENTS))
+        points[0, 1], points[12, 1] = 140.0, 80.0
+        return points
+
+    shape = (200, 200)
+    a, b = skeleton(90.0), skeleton(100.0)  # drawn 0.15 x 60 = 9 px either side: they overlap in x 91-99
+    mask_a, mask_b = np.zeros(shape, bool), np.zeros(shape, bool)
+    mask_a[:, 80:100] = True  # a's body covers the overlap: a is in front, b's visible part is beside it
+    mask_b[:, 100:110] = True
+    kwargs = {"parents": list(SMPL_PARENTS), "radius_torsos": 0.15, "min_pixels": 50, "min_share": 0.5,
+              "max_minority": 0.5}
+    assert front_by_masks(a, b, mask_a, mask_b, **kwargs) == 0
+    assert front_by_masks(b, a, mask_b, mask_a, **kwargs) == 1
+    mask_b[:, 90:100] = True  # both masks claim the overlap: no answer
+    assert front_by_masks(a, b, mask_a, mask_b, **kwargs) is None
+    assert front_by_masks(a, skeleton(150.0), mask_a, mask_b, **kwargs) is None  # apart: no overlap
+    assert front_by_masks(a, b, np.zeros(shape, bool), np.zeros(shape, bool), **kwargs) is None  # both hidden
+
+
 def test_the_scene_scale_removes_one_common_factor_about_the_camera_and_nothing_else(model):
     """scene_scale_errors: two people, each frame scaled by 1.07 about that frame's camera centre (a camera that
     moves), project to the same pixels and come back exactly; with one of them then moved 30 cm further, no

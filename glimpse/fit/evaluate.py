@@ -7,13 +7,16 @@ error over the 24 body joints of the fitted (not interpolated) frames, three way
 - ``frame_aligned_m``: after a similarity per frame (PA-MPJPE, as HMR papers report).
 
 For a scene's people together, ``scene_scale_errors`` removes only what no single view can tell: the whole
-scene scaled about the camera by one factor (placement_errors: how people stand relative to each other).
+scene scaled about the camera by one factor (placement_errors: how people stand relative to each other), and
+``front_by_masks`` reads who hides whom from the people's masks where their skeletons overlap in the image, to
+compare with the fitted and the true depth order.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import torch
 from scipy.optimize import minimize_scalar
@@ -25,6 +28,7 @@ from glimpse.cameras.align import Similarity, umeyama
 
 SCENE_SCALE_BOUNDS = (0.25, 4.0)  # the common factor searched: a scene fitted 4 times too near or far is not a fit
 SCENE_SCALE_TOLERANCE = 1e-9  # the factor to this (relative to 1: far below any error that matters)
+PELVIS, NECK = 0, 12  # body joints: a projected torso's length, which sets how wide a skeleton is drawn
 
 
 def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, body_pose: np.ndarray,
@@ -36,7 +40,7 @@ def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, 
     return out.joints.numpy()
 
 
-def _true_joints(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> np.ndarray:
+def true_joints(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> np.ndarray:
     """[T, 24, 3] the true joints in ``fitted``'s fitted (not interpolated) frames (truth as in ``joint_errors``)."""
     rows = np.searchsorted(truth["frame_ids"], fitted.frame_ids[~fitted.interpolated])
     return body_joints(model, truth["betas"], truth["global_orient"][rows], truth["body_pose"][rows],
@@ -46,7 +50,7 @@ def _true_joints(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
 def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> dict[str, float]:
     """truth: betas [10] and per-frame global_orient, body_pose, transl indexed by ``truth['frame_ids']``."""
     keep = ~fitted.interpolated
-    true = _true_joints(model, fitted, truth)
+    true = true_joints(model, fitted, truth)
     fit = body_joints(model, fitted.betas, fitted.global_orient[keep], fitted.body_pose[keep], fitted.transl[keep],
                       fitted.scale)
     whole = umeyama(fit.reshape(-1, 3), true.reshape(-1, 3))
@@ -64,7 +68,7 @@ def moved_onto_truth(model: BodyModel, fitted: BodyParams,
     fitted (not interpolated) frames to the true ones (truth as in ``joint_errors``), every frame moved alike: its
     placement and size made right, its pose kept. Returns (moved params, the similarity)."""
     joints = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)
-    move = umeyama(joints[~fitted.interpolated].reshape(-1, 3), _true_joints(model, fitted, truth).reshape(-1, 3))
+    move = umeyama(joints[~fitted.interpolated].reshape(-1, 3), true_joints(model, fitted, truth).reshape(-1, 3))
     orient = (Rotation.from_matrix(move.rotation) * Rotation.from_rotvec(fitted.global_orient)).as_rotvec()
     scale = fitted.scale * move.scale
     unmoved_root = body_joints(model, fitted.betas, orient, fitted.body_pose, np.zeros_like(fitted.transl), scale)[:, 0]
@@ -82,7 +86,7 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
         keep = ~params.interpolated
         ours = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
                            params.transl[keep], params.scale)[:, 0]
-        true = _true_joints(model, params, truth[pid])[:, 0]
+        true = true_joints(model, params, truth[pid])[:, 0]
         pelvis[pid] = {int(f): (o, q) for f, o, q in zip(params.frame_ids[keep], ours, true)}
     distance_errors, agreements = [], []
     pids = sorted(pelvis)
@@ -117,7 +121,7 @@ def scene_scale_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: d
         centres = np.stack([camera_centres[int(f)] for f in params.frame_ids[keep]])[:, None]
         fit = body_joints(model, params.betas, params.global_orient[keep], params.body_pose[keep],
                           params.transl[keep], params.scale)
-        true = _true_joints(model, params, truth[pid])
+        true = true_joints(model, params, truth[pid])
         offsets[pid] = ((fit - centres).reshape(-1, 3), (true - centres).reshape(-1, 3))
     fit_all = np.concatenate([f for f, _ in offsets.values()])
     true_all = np.concatenate([t for _, t in offsets.values()])
@@ -152,3 +156,36 @@ def floor_errors(normal: np.ndarray, camera_height: float, camera_centre: np.nda
     return {"tilt_deg": float(np.degrees(np.arccos(np.clip(normal @ true_up, -1.0, 1.0)))),
             "pitch_error_deg": pitch - true_pitch, "roll_error_deg": roll - true_roll,
             "camera_height_error_m": float(camera_height) - true_height}
+
+
+def skeleton_pixels(points: np.ndarray, parents: list[int], radius_px: float, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool: the pixels within ``radius_px`` of the bones (joint to parent) of [J, 2] projected joints."""
+    image = np.zeros(shape, np.uint8)
+    thickness = max(1, round(2 * radius_px))
+    for joint, parent in enumerate(parents):
+        if parent >= 0:
+            cv2.line(image, tuple(int(round(v)) for v in points[joint]), tuple(int(round(v)) for v in points[parent]),
+                     1, thickness)
+    return image.astype(bool)
+
+
+def front_by_masks(points_a: np.ndarray, points_b: np.ndarray, mask_a: np.ndarray, mask_b: np.ndarray,
+                   parents: list[int], radius_torsos: float, min_pixels: int, min_share: float,
+                   max_minority: float) -> int | None:
+    """Who of two people the masks put in front where their projected skeletons overlap: 0 (a) or 1 (b), or None
+    when they do not tell. points_* [J, 2] projected body joints (pixels), mask_* [H, W] bool the people's visible
+    masks. Each skeleton is drawn ``radius_torsos`` of its projected torso (pelvis to neck) wide; where the two
+    drawings overlap in at least ``min_pixels`` pixels, the person in front owns them: the masks tell when one mask
+    covers at least ``min_share`` of the overlap and the other at most ``max_minority`` times as much."""
+    shape = mask_a.shape
+    regions = [skeleton_pixels(p, parents, radius_torsos * float(np.linalg.norm(p[PELVIS] - p[NECK])), shape)
+               for p in (points_a, points_b)]
+    overlap = regions[0] & regions[1]
+    area = int(np.count_nonzero(overlap))
+    if area < min_pixels:
+        return None
+    owned = [int(np.count_nonzero(mask & overlap)) for mask in (mask_a, mask_b)]
+    front = int(np.argmax(owned))
+    if owned[front] < min_share * area or owned[1 - front] > max_minority * owned[front]:
+        return None
+    return front

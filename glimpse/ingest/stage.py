@@ -8,7 +8,8 @@ Three streaming passes (frames decoded one at a time; the tracking pass also hol
    people are followed, found and re-identified (at ``track_max_side``); each frame's depth-ordered person
    labels go to a work folder; a track that finds its person again looks again at the frames it missed
    (glimpse.ingest.backfill: the last ``track_backfill_frames`` frames are held for it);
-3. write: per person its masks and COCO-17 keypoints (left and right made consistent along the track, frames
+3. write: the tracks kept (long, large and upright enough: glimpse.ingest.upright); per person its masks and
+   COCO-17 keypoints (left and right made consistent along the track, frames
    squeezed at the border and joints hidden behind others left out: glimpse.ingest.sides, glimpse.ingest.truncation,
    glimpse.ingest.occlusion), the preview video and the tracks report
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
