@@ -143,6 +143,7 @@ def run(scenario: str, size: str, seed: int, work: Path, params: str = "") -> li
         rows.append({"scenario": scenario, "person": pid, "frames": s.frames, "recall": s.recall,
                      "switches": s.switches, "pck": s.pck, "pck_joints": joint_scores[pid].pck,
                      "pck_silhouette": s.pck_silhouette, "hidden_reported": s.hidden_reported,
+                     "outside_reported": s.outside_reported,
                      "mask_iou": s.mask_iou, "ids": ",".join(s.ids),
                      "fps": report["tracking_fps"], "ms_per_person": 1000 / report["tracking_fps"] / people,
                      "camera": report["camera_motion"]})
@@ -164,15 +165,17 @@ def main() -> None:
           f"PCK@{PCK_FRACTION} >= 0.90, mask IoU >= 0.85\n")
     print("PCK over the joints in view (not behind anyone or anything, the person's own body included); "
           "'on silhouette' also counts joints behind the person's own body (a side-on person's far arm), and "
-          "'hidden reported' is the share of those the ingest gave a confidence > 0\n")
+          "'hidden reported' is the share of those the ingest gave a confidence > 0; 'outside reported' the share of "
+          "the joints outside the image it gave one ('-': none outside)\n")
     print("| scenario | camera | person | frames (>= half visible) | recall | switches | PCK@0.1 skin | "
-          "PCK@0.1 joint centres | PCK@0.1 skin, on silhouette | hidden reported | mask IoU | found as | "
-          "tracking fps | ms / frame / person |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "PCK@0.1 joint centres | PCK@0.1 skin, on silhouette | hidden reported | outside reported | mask IoU | "
+          "found as | tracking fps | ms / frame / person |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
+        outside = "-" if np.isnan(r["outside_reported"]) else f"{r['outside_reported']:.2f}"
         print(f"| {r['scenario']} | {r['camera']} | {r['person']} | {r['frames']} | {r['recall']:.3f} | {r['switches']} "
               f"| {r['pck']:.3f} | {r['pck_joints']:.3f} | {r['pck_silhouette']:.3f} | {r['hidden_reported']:.2f} "
-              f"| {r['mask_iou']:.3f} | {r['ids']} | {r['fps']:.2f} | {r['ms_per_person']:.0f} |")
+              f"| {outside} | {r['mask_iou']:.3f} | {r['ids']} | {r['fps']:.2f} | {r['ms_per_person']:.0f} |")
 
 
 if __name__ == "__main__":

@@ -204,6 +204,20 @@ def test_joints_behind_the_persons_own_body_are_not_counted_in_pck_but_reported(
     assert scores["a"].hidden_reported == 1.0
 
 
+def test_joints_outside_the_image_that_the_ingest_reported_are_counted() -> None:
+    a_true, a_found = _person(2)
+    joints = a_true.joints.copy()
+    joints[[9, 10], 0] = [-3.0, -8.0]  # both wrists left the 40 x 20 image on the left
+    joints[15, 1] = 19.4  # an ankle on the last row: inside
+    keypoints = a_found.keypoints.copy()
+    keypoints[10, 2] = 0.0  # one wrist not reported, the other squeezed inside the border
+    truth = {0: {"a": TruePerson(a_true.mask, joints, a_true.visible)}}
+    scores = score_people(truth, {0: {"x": FoundPerson(a_found.mask, keypoints)}}, pck_fraction=0.1)
+    assert scores["a"].outside_reported == 0.5
+    scores = score_people({0: {"a": a_true}}, {0: {"x": a_found}}, pck_fraction=0.1)
+    assert np.isnan(scores["a"].outside_reported)  # nothing outside: nothing to report
+
+
 def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
     from glimpse.ingest.blazepose import sides_to_swap, swap_sides
 

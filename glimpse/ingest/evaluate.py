@@ -13,6 +13,7 @@ COCO-17 joints inside the image and on the person's own visible pixels):
   their visible pixels, but the camera does not see it, and the ingest is asked not to invent it). PCK over
   every visible joint, the far arm included, is given too (``pck_silhouette``);
 - hidden reported: the fraction of joints behind the person's own body that were given a confidence > 0;
+- outside reported: the fraction of the joints outside the image that were given a confidence > 0;
 - mask IoU: found mask against the true visible mask (0 where nobody was matched).
 """
 
@@ -55,6 +56,7 @@ class PersonScore:
     pck: float  # over the joints in view
     pck_silhouette: float  # over every visible joint, those behind the person's own body included
     hidden_reported: float  # share of the joints behind the person's own body given a confidence > 0
+    outside_reported: float  # share of the joints outside the image given a confidence > 0 (nan: none outside)
     mask_iou: float
     ids: tuple[str, ...]  # found ids matched to the person, in order of first match
 
@@ -86,6 +88,13 @@ def in_front_of_own_body(joint_depth: np.ndarray, front_depth: np.ndarray, depth
     return no_surface | (joint_depth <= front_depth + depth_under_skin + margin)
 
 
+def outside_image(joints: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[J] bool: which of ``joints`` [J, 2] (pixels, centres at integers) lie outside an image of ``shape`` (H, W)."""
+    height, width = shape
+    x, y = joints[:, 0], joints[:, 1]
+    return (x < -0.5) | (x > width - 0.5) | (y < -0.5) | (y > height - 0.5)
+
+
 def pck(joints: np.ndarray, visible: np.ndarray, keypoints: np.ndarray, fraction: float) -> tuple[int, int]:
     """(correct, counted) visible joints within ``fraction`` of the torso size."""
     torso = np.linalg.norm(joints[TORSO_JOINTS[0]] - joints[TORSO_JOINTS[1]])
@@ -104,7 +113,8 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
             if person.visible.mean() < HALF_VISIBLE:
                 continue
             tally = tallies.setdefault(pid, {"frames": 0, "hit": 0, "ids": [], "correct": 0, "counted": 0, "iou": 0.0,
-                                             "silhouette": np.zeros(2), "hidden": np.zeros(2)})
+                                             "silhouette": np.zeros(2), "hidden": np.zeros(2),
+                                             "outside": np.zeros(2)})
             tally["frames"] += 1
             if pid not in matches:
                 continue
@@ -119,6 +129,8 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
             tally["silhouette"] += pck(person.joints, person.visible, keypoints, pck_fraction)
             hidden = person.visible & ~person.seen
             tally["hidden"] += (np.count_nonzero(hidden & (keypoints[:, 2] > 0)), np.count_nonzero(hidden))
+            outside = outside_image(person.joints, person.mask.shape)
+            tally["outside"] += (np.count_nonzero(outside & (keypoints[:, 2] > 0)), np.count_nonzero(outside))
     scores = {}
     for pid, t in sorted(tallies.items()):
         ids = t["ids"]
@@ -128,6 +140,7 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
             pck=t["correct"] / t["counted"] if t["counted"] else 0.0,
             pck_silhouette=t["silhouette"][0] / t["silhouette"][1] if t["silhouette"][1] else 0.0,
             hidden_reported=t["hidden"][0] / t["hidden"][1] if t["hidden"][1] else 0.0,
+            outside_reported=t["outside"][0] / t["outside"][1] if t["outside"][1] else float("nan"),
             mask_iou=t["iou"] / t["frames"],
             ids=tuple(dict.fromkeys(ids)))
     return scores
