@@ -38,10 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ingest import fixture_video, found_people, true_people  # noqa: E402  (bench/ingest.py, beside this file)
 
 from glimpse.body.keypoints import keypoint_map  # noqa: E402
-from glimpse.body.model_file import SMPL_PARENTS  # noqa: E402
-from glimpse.body.params import BodyParams  # noqa: E402
 from glimpse.body.model import BodyModel  # noqa: E402
+from glimpse.body.model_file import SMPL_PARENTS  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
+from glimpse.body.params import BodyParams  # noqa: E402
 from glimpse.config import config_from_mapping, load_pipeline_yaml, parse_cli_params, resolve_params  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
 from glimpse.fit.evaluate import (  # noqa: E402
