@@ -50,12 +50,18 @@ for _left, _right in COCO17_LEG_PAIRS:
     COCO17_LEG_EXCHANGE[_left], COCO17_LEG_EXCHANGE[_right] = _right, _left
 
 
-def torso_lengths(keypoints: np.ndarray) -> np.ndarray:
-    """[T, 17, 3] COCO-17 keypoints (x, y, confidence; 0 = missing) -> [T] pixels from the mid hip to the mid
+def torso_axes(keypoints: np.ndarray) -> np.ndarray:
+    """[T, 17, 3] COCO-17 keypoints (x, y, confidence; 0 = missing) -> [T, 2] pixels from the mid hip to the mid
     shoulder, NaN where a shoulder or a hip is missing."""
     complete = (keypoints[:, list(SHOULDERS + HIPS), 2] > 0).all(1)
     up = keypoints[:, list(SHOULDERS), :2].mean(1) - keypoints[:, list(HIPS), :2].mean(1)
-    return np.where(complete, np.linalg.norm(up, axis=1), np.nan)
+    return np.where(complete[:, None], up, np.nan)
+
+
+def torso_lengths(keypoints: np.ndarray) -> np.ndarray:
+    """[T, 17, 3] COCO-17 keypoints -> [T] pixels from the mid hip to the mid shoulder, NaN where a shoulder or a
+    hip is missing (:func:`torso_axes`)."""
+    return np.linalg.norm(torso_axes(keypoints), axis=1)
 
 
 def side_displacements(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:

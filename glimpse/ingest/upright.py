@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from glimpse.ingest.sides import HIPS, SHOULDERS
+from glimpse.ingest.sides import torso_axes
 
 UPSIDE_DOWN_COS = -0.5  # a torso (mid hip -> mid shoulder) more than 120 degrees from the image's up is upside down
 
@@ -20,9 +20,9 @@ UPSIDE_DOWN_COS = -0.5  # a torso (mid hip -> mid shoulder) more than 120 degree
 def upside_down_share(keypoints: np.ndarray) -> float:
     """Share of a track's frames showing its torso (both shoulders and both hips, confidence > 0) in which the torso
     points down the image; keypoints [T, 17, 3] COCO-17 pixels (y down) and confidence. 0 when no frame shows it."""
-    complete = (keypoints[:, list(SHOULDERS + HIPS), 2] > 0).all(1)
-    if not complete.any():
+    torso = torso_axes(keypoints)
+    torso = torso[~np.isnan(torso[:, 0])]
+    if not len(torso):
         return 0.0
-    torso = keypoints[complete][:, list(SHOULDERS), :2].mean(1) - keypoints[complete][:, list(HIPS), :2].mean(1)
     cos_from_up = -torso[:, 1] / np.maximum(np.linalg.norm(torso, axis=1), 1e-9)
     return float((cos_from_up < UPSIDE_DOWN_COS).mean())
