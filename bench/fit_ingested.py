@@ -28,6 +28,7 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -139,14 +140,18 @@ def mask_order(model: BodyModel, fitted: dict[str, BodyParams], truths: dict[str
             points[pid, int(frame)] = pixels
             pelvis_depth[pid, int(frame)] = (depth[0], camera.project(truth[:1])[1][0])
     counts = {"decided": 0, "fitted_as_masks": 0, "true_as_masks": 0, "fitted_as_true": 0}
+    frames = {pid: {f for p, f in points if p == pid} & set(masks[pid]) for pid in fitted}
+
+    @cache
+    def mask(pid: str, frame: int) -> np.ndarray:
+        return read_mask(masks[pid][frame]) > 0
+
     pids = sorted(fitted)
     for k, a in enumerate(pids):
         for b in pids[k + 1:]:
-            for frame in sorted({f for p, f in points if p == a} & {f for p, f in points if p == b}):
-                if frame not in masks[a] or frame not in masks[b]:
-                    continue
-                front = front_by_masks(points[a, frame], points[b, frame], read_mask(masks[a][frame]) > 0,
-                                       read_mask(masks[b][frame]) > 0, SMPL_PARENTS, **MASK_ORDER)
+            for frame in sorted(frames[a] & frames[b]):
+                front = front_by_masks(points[a, frame], points[b, frame], mask(a, frame), mask(b, frame),
+                                       SMPL_PARENTS, **MASK_ORDER)
                 if front is None:
                     continue
                 (fitted_a, true_a), (fitted_b, true_b) = pelvis_depth[a, frame], pelvis_depth[b, frame]
