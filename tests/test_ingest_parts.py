@@ -25,6 +25,7 @@ from glimpse.ingest.crop import (
     crop_affine,
     crop_image,
     crop_to_image,
+    outside_image,
     paste_to_image,
     region_around_box,
     region_from_alignment,
@@ -67,6 +68,12 @@ def test_region_around_box_is_an_upright_square_on_the_longer_side() -> None:
     assert region.angle == 0.0 and region.side == pytest.approx(120.0)
     np.testing.assert_allclose(region.box(), [-40, 0, 80, 120])
 
+
+
+def test_outside_image_follows_the_pixel_centre_convention() -> None:
+    # a 4 x 3 image's pixels cover -0.5 .. 3.5 across and -0.5 .. 2.5 down
+    points = np.array([[-0.5, 0.0], [-0.51, 0.0], [3.5, 2.5], [3.51, 1.0], [1.0, 2.51], [1.0, -0.6]])
+    assert outside_image(points, (3, 4)).tolist() == [False, True, False, True, True, True]
 
 # --- BlazePose decoding --------------------------------------------------------------------------------------
 

@@ -74,3 +74,11 @@ def region_around_box(box: np.ndarray, grow: float) -> Region:
     """An upright square around an axis-aligned box (x0, y0, x1, y1), its longer side grown by ``grow``."""
     x0, y0, x1, y1 = box
     return Region(np.array([(x0 + x1) / 2, (y0 + y1) / 2]), max(x1 - x0, y1 - y0) * grow, 0.0)
+
+
+def outside_image(points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[N] bool: which of ``points`` [N, 2] (pixels, centres at integers) lie outside an image of ``shape`` (H, W),
+    whose pixels cover -0.5 .. W - 0.5 and -0.5 .. H - 0.5."""
+    height, width = shape
+    x, y = points[:, 0], points[:, 1]
+    return (x < -0.5) | (x > width - 0.5) | (y < -0.5) | (y > height - 0.5)

@@ -25,6 +25,8 @@ from itertools import pairwise
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from glimpse.ingest.crop import outside_image
+
 MATCH_MIN_IOU = 0.3
 HALF_VISIBLE = 0.5
 TORSO_JOINTS = (5, 12)  # COCO-17 left shoulder, right hip
@@ -86,13 +88,6 @@ def in_front_of_own_body(joint_depth: np.ndarray, front_depth: np.ndarray, depth
     chest's thickness."""
     no_surface = front_depth <= 0
     return no_surface | (joint_depth <= front_depth + depth_under_skin + margin)
-
-
-def outside_image(joints: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """[J] bool: which of ``joints`` [J, 2] (pixels, centres at integers) lie outside an image of ``shape`` (H, W)."""
-    height, width = shape
-    x, y = joints[:, 0], joints[:, 1]
-    return (x < -0.5) | (x > width - 0.5) | (y < -0.5) | (y > height - 0.5)
 
 
 def pck(joints: np.ndarray, visible: np.ndarray, keypoints: np.ndarray, fraction: float) -> tuple[int, int]:

@@ -43,7 +43,7 @@ from scipy.optimize import linear_sum_assignment
 from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
 from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, BlazePose, PoseLandmarks, box_iou
 from glimpse.ingest.config import IngestConfig
-from glimpse.ingest.crop import Region, paste_to_image
+from glimpse.ingest.crop import Region, outside_image, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.detection import detector_regions
 from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
@@ -474,9 +474,7 @@ class Tracker:
         """Add the observation's keypoints (those outside the image or below ``keypoint_min_confidence`` at
         confidence 0), 3D landmarks, box and legs' dispute to the track's per-frame lists, in frame order."""
         points, confidence = observation.keypoints[:, :2], observation.keypoints[:, 2]
-        height, width = observation.mask.shape
-        inside = (points[:, 0] >= -0.5) & (points[:, 0] <= width - 0.5) & (points[:, 1] >= -0.5) & (points[:, 1] <= height - 0.5)
-        confidence = np.where(inside, confidence, 0.0)
+        confidence = np.where(outside_image(points, observation.mask.shape), 0.0, confidence)
         confidence = np.where(confidence >= self.config.keypoint_min_confidence, confidence, 0.0)
         at = bisect.bisect(track.frames, frame_id)
         track.frames.insert(at, frame_id)
