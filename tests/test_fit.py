@@ -17,7 +17,7 @@ from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, scene_scale_errors
+from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, placement_errors, scene_scale_errors
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
@@ -359,6 +359,28 @@ def test_the_scene_scale_removes_one_common_factor_about_the_camera_and_nothing_
     as_fitted = [joint_errors(model, person, truths[pid])["mpjpe_m"] for pid, person in {**fitted, "far": off}.items()]
     assert np.mean(list(errors.values())) <= np.mean(as_fitted)  # the best factor is never worse than none
     assert joint_errors(model, off, truths["far"])["sequence_aligned_m"] < 0.01
+
+
+def test_placement_errors_count_the_depth_order_and_how_far_apart_its_misses_were(model):
+    """placement_errors: two people 1.5 m apart in depth, fitted in place, agree in every frame; with the farther one
+    fitted 2 m nearer in one frame the order is wrong there, and the largest miss is their true 1.5 m gap."""
+    frames = 4
+    centres = {f: np.zeros(3) for f in range(frames)}
+    near = _known_person(model, frames)
+    far = replace(near, transl=near.transl + [0.3, 0.0, 1.5])
+    truths = {"near": _truth(near), "far": _truth(far)}
+    placed = placement_errors(model, {"near": near, "far": far}, truths, centres)
+    assert placed["depth_order_agreement"] == 1.0 and placed["depth_order_largest_miss_m"] == 0.0
+    assert placed["pelvis_distance_error_m"] < 1e-9
+    def first_pelvis_distance(person: BodyParams) -> float:
+        joints = body_joints(model, person.betas, person.global_orient, person.body_pose, person.transl)
+        return float(np.linalg.norm(joints[0, 0]))
+
+    true_gap = first_pelvis_distance(far) - first_pelvis_distance(near)
+    swapped = replace(far, transl=far.transl - np.array([[0.0, 0.0, 2.0]] + [[0.0, 0.0, 0.0]] * (frames - 1)))
+    placed = placement_errors(model, {"near": near, "far": swapped}, truths, centres)
+    assert placed["depth_order_agreement"] == pytest.approx(0.75)
+    assert placed["depth_order_largest_miss_m"] == pytest.approx(true_gap)
 
 
 def test_fit_to_clean_3d_keypoints_recovers_the_body(model, config, prior):

@@ -78,9 +78,11 @@ def moved_onto_truth(model: BodyModel, fitted: BodyParams,
 def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
                      camera_centres: dict[int, np.ndarray]) -> dict[str, float]:
     """How people are placed relative to each other, over every pair and the frames both were fitted in:
-    ``pelvis_distance_error_m``, the mean of | |p_i - p_j| - |q_i - q_j| | (fitted pelvises p, true q), and
+    ``pelvis_distance_error_m``, the mean of | |p_i - p_j| - |q_i - q_j| | (fitted pelvises p, true q);
     ``depth_order_agreement``, the fraction of (pair, frame) whose nearer person (pelvis distance from
-    the camera centre [3] of that frame) is the true nearer one. nan without a pair."""
+    the camera centre [3] of that frame) is the true nearer one; and ``depth_order_largest_miss_m``, over the
+    (pair, frame) whose order is wrong, the largest difference of the two true pelvis distances from the camera
+    (0 when none is wrong: how far apart in depth the people were where the order failed). nan without a pair."""
     pelvis = {}
     for pid, params in fitted.items():
         keep = ~params.interpolated
@@ -88,7 +90,7 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
                            params.transl[keep], params.scale)[:, 0]
         true = true_joints(model, params, truth[pid])[:, 0]
         pelvis[pid] = {int(f): (o, q) for f, o, q in zip(params.frame_ids[keep], ours, true)}
-    distance_errors, agreements = [], []
+    distance_errors, agreements, missed_gaps = [], [], [0.0]
     pids = sorted(pelvis)
     for a, pid in enumerate(pids):
         for other in pids[a + 1:]:
@@ -96,12 +98,15 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
                 (p, q), (p2, q2) = pelvis[pid][frame], pelvis[other][frame]
                 distance_errors.append(abs(np.linalg.norm(p - p2) - np.linalg.norm(q - q2)))
                 centre = camera_centres[frame]
-                nearer = np.linalg.norm(p - centre) < np.linalg.norm(p2 - centre)
-                agreements.append(nearer == (np.linalg.norm(q - centre) < np.linalg.norm(q2 - centre)))
+                true_gap = np.linalg.norm(q - centre) - np.linalg.norm(q2 - centre)
+                agreements.append((np.linalg.norm(p - centre) < np.linalg.norm(p2 - centre)) == (true_gap < 0))
+                if not agreements[-1]:
+                    missed_gaps.append(abs(float(true_gap)))
     if not distance_errors:
-        return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan")}
+        return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan"),
+                "depth_order_largest_miss_m": float("nan")}
     return {"pelvis_distance_error_m": float(np.mean(distance_errors)),
-            "depth_order_agreement": float(np.mean(agreements))}
+            "depth_order_agreement": float(np.mean(agreements)), "depth_order_largest_miss_m": max(missed_gaps)}
 
 
 def scene_scale_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
