@@ -372,6 +372,7 @@ def test_placement_errors_count_the_depth_order_and_how_far_apart_its_misses_wer
     placed = placement_errors(model, {"near": near, "far": far}, truths, centres)
     assert placed["depth_order_agreement"] == 1.0 and placed["depth_order_largest_miss_m"] == 0.0
     assert placed["pelvis_distance_error_m"] < 1e-9
+
     def first_pelvis_distance(person: BodyParams) -> float:
         joints = body_joints(model, person.betas, person.global_orient, person.body_pose, person.transl)
         return float(np.linalg.norm(joints[0, 0]))
