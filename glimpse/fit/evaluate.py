@@ -99,8 +99,9 @@ def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dic
                 distance_errors.append(abs(np.linalg.norm(p - p2) - np.linalg.norm(q - q2)))
                 centre = camera_centres[frame]
                 true_gap = np.linalg.norm(q - centre) - np.linalg.norm(q2 - centre)
-                agreements.append((np.linalg.norm(p - centre) < np.linalg.norm(p2 - centre)) == (true_gap < 0))
-                if not agreements[-1]:
+                in_order = (np.linalg.norm(p - centre) < np.linalg.norm(p2 - centre)) == (true_gap < 0)
+                agreements.append(in_order)
+                if not in_order:
                     missed_gaps.append(abs(float(true_gap)))
     if not distance_errors:
         return {"pelvis_distance_error_m": float("nan"), "depth_order_agreement": float("nan"),
