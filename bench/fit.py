@@ -80,7 +80,7 @@ def _floor_label(floor: dict) -> str:
     return "planted feet" if floor.get("planted_feet_only") else "yes"
 
 
-def _degrade(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np.random.Generator) -> None:
+def degrade_keypoints(scene: Path, truth: Path, model: BodyModel, condition: str, rng: np.random.Generator) -> None:
     """Rewrite every person's keypoint files in ``scene`` for ``condition``."""
     _, _, cameras = read_cameras_json(scene / "cameras.json")
     extra_drop = (TOTAL_DROP - KEYPOINT_DROP_RATE) / (1 - KEYPOINT_DROP_RATE)
@@ -138,7 +138,7 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
             scene_dir = root / f"{scenario}_{size}_{condition}"
             shutil.rmtree(scene_dir, ignore_errors=True)
             shutil.copytree(original, scene_dir)
-            _degrade(scene_dir, truth, model, condition, np.random.default_rng(seed))
+            degrade_keypoints(scene_dir, truth, model, condition, np.random.default_rng(seed))
             scene = load_scene(scene_dir)
             _, _, cameras = read_cameras_json(scene_dir / "cameras.json")
             centres = {fid: camera.centre for fid, camera in cameras.items()}

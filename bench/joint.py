@@ -12,6 +12,7 @@ scale above HEDGEHOG_RATIO) and each person's canonical holes (glimpse.eval.cove
 DIR saves each person's canonical turntable per prior. --placement-from-truth moves each fitted person by
 the one similarity that best aligns its joints to the truth before stage 03: the pose as fitted, the
 placement and size exact (a diagnostic: what a 2D fit's held-out loss owes to where it put people).
+--exact-keypoints fits exact keypoints instead of the fixture's noisy ones (a diagnostic: what the noise costs).
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, per prior, as a ratio to one forward+backward render of the same
@@ -20,7 +21,7 @@ the prior's share of an iteration is 1 - (ms per iteration with prior none) / (m
 
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
                                     [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
-                                    [--placement-from-truth] [--pictures DIR] [--keep DIR]
+                                    [--placement-from-truth] [--exact-keypoints] [--pictures DIR] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -56,6 +57,8 @@ from glimpse.io.cameras_json import read_cameras_json  # noqa: E402
 from glimpse.io.images import write_png  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
+
+from fit import degrade_keypoints  # noqa: E402  (bench/fit.py, beside this file)
 
 THREADS = 2
 SEED = 0
@@ -95,10 +98,13 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
 
 def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float | None, joint_params: str,
               seed: int = SEED, priors: tuple[str, ...] = ("none",),
-              placement_from_truth: bool = False) -> Iterator[tuple[str, Path]]:
+              placement_from_truth: bool = False, exact_keypoints: bool = False) -> Iterator[tuple[str, Path]]:
     """Stages 01-05 on a fresh fixture scene, then 06-07 once per prior: yields (prior, run folder) after each
     (the next prior's stage 06 replaces the previous one's outputs)."""
     scene = make_scene(scenario, root / f"{scenario}_{size}_{fit}_{seed}", size, seed=seed)
+    if exact_keypoints:
+        degrade_keypoints(scene, scene.with_name(scene.name + ".groundtruth"),
+                          BodyModel.from_file(BODY_MODEL, dtype=torch.float64), "clean", np.random.default_rng(seed))
     out = root / f"out_{fit}_{seed}"
     params = f"{UPSTREAM_PARAMS} 02_smpl_fit.mode={fit}"
     params += f" 04_bg_pretrain.schedule_scale={bg_schedule}" if bg_schedule else ""
@@ -163,8 +169,10 @@ def turntables(people: list, picture: Path) -> None:
 
 
 def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str,
-            priors: tuple[str, ...], pictures: Path | None, placement_from_truth: bool = False) -> None:
+            priors: tuple[str, ...], pictures: Path | None, placement_from_truth: bool = False,
+            exact_keypoints: bool = False) -> None:
     moved = "; each moved onto the truth by one similarity (placement from truth)" if placement_from_truth else ""
+    moved += "; exact keypoints (the fixture's noise taken out)" if exact_keypoints else ""
     print(f"bodies fitted with 02_smpl_fit.mode={fit}{moved}; seed {seed}; stage 04 schedule_scale "
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
     print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | seen PSNR | SSIM | LPIPS x100 | "
@@ -175,7 +183,7 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
     baselines = []
     for scenario in scenarios:
         for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors,
-                                        placement_from_truth):
+                                        placement_from_truth, exact_keypoints):
             metrics = read_json(run_dir / "07_eval" / "metrics.json")
             report = read_json(run_dir / "06_joint_opt" / "report.json")
             tables = metrics["tables"]
@@ -244,6 +252,9 @@ def main() -> int:
                              "parameter overrides (surface@prior_surface.garments=false)")
     parser.add_argument("--placement-from-truth", action="store_true",
                         help="move each fitted person onto the truth by one similarity before stage 03 (a diagnostic)")
+    parser.add_argument("--exact-keypoints", action="store_true",
+                        help="replace the fixture's noisy keypoints by exact ones, same frames and confidences "
+                             "(a diagnostic: what the keypoints' noise costs)")
     parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
@@ -259,7 +270,7 @@ def main() -> int:
         if args.quality:
             print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
             quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,
-                    priors, args.pictures, args.placement_from_truth)
+                    priors, args.pictures, args.placement_from_truth, args.exact_keypoints)
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
             speed(Path(tmp) / "speed", priors)

@@ -98,6 +98,12 @@ def pck(joints: np.ndarray, visible: np.ndarray, keypoints: np.ndarray, fraction
     return int(correct.sum()), int(visible.sum())
 
 
+def reported(joints: np.ndarray, keypoints: np.ndarray) -> np.ndarray:
+    """joints: (J,) bool, a set of joints; keypoints: (J, 3) x, y, confidence. Returns (how many of the set were
+    given a confidence > 0, how many the set holds)."""
+    return np.array([np.count_nonzero(joints & (keypoints[:, 2] > 0)), np.count_nonzero(joints)])
+
+
 def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[str, FoundPerson]],
                  pck_fraction: float) -> dict[str, PersonScore]:
     """truth, found: frame id -> pid -> person. Returns true pid -> score (see the module docstring)."""
@@ -122,10 +128,8 @@ def score_people(truth: dict[int, dict[str, TruePerson]], found: dict[int, dict[
             tally["correct"] += correct
             tally["counted"] += counted
             tally["silhouette"] += pck(person.joints, person.visible, keypoints, pck_fraction)
-            hidden = person.visible & ~person.seen
-            tally["hidden"] += (np.count_nonzero(hidden & (keypoints[:, 2] > 0)), np.count_nonzero(hidden))
-            outside = outside_image(person.joints, person.mask.shape)
-            tally["outside"] += (np.count_nonzero(outside & (keypoints[:, 2] > 0)), np.count_nonzero(outside))
+            tally["hidden"] += reported(person.visible & ~person.seen, keypoints)
+            tally["outside"] += reported(outside_image(person.joints, person.mask.shape), keypoints)
     scores = {}
     for pid, t in sorted(tallies.items()):
         ids = t["ids"]
