@@ -155,10 +155,13 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
                 frames = sum(int((~fit.params.interpolated).sum()) for fit in fits)
                 for fit in fits:
                     errors = joint_errors(model, fit.params, truths[fit.pid])
+                    true = truths[fit.pid]
                     rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
                                  "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
                                  "floor": _floor_label(floor), **placement, **errors, "scene_scale": scene_scale,
-                                 "scene_scaled_m": scene_scaled[fit.pid]})
+                                 "scene_scaled_m": scene_scaled[fit.pid],
+                                 "stature_m": float(model.stature(fit.params.betas)) * float(fit.params.scale),
+                                 "true_stature_m": float(model.stature(true["betas"])) * float(true.get("scale", 1.0))})
     return rows
 
 
@@ -311,7 +314,8 @@ def main() -> int:
                     print(f"{r['scenario']} {r['person']} {r['mode']} {r['condition']}: "
                           f"{100 * r['mpjpe_m']:.1f} / {100 * r['scene_scaled_m']:.1f} / "
                           f"{100 * r['sequence_aligned_m']:.1f} / {100 * r['frame_aligned_m']:.1f} cm (as fitted / "
-                          f"up to one scene scale / sequence-aligned / frame-aligned), {r['seconds']:.1f} s")
+                          f"up to one scene scale / sequence-aligned / frame-aligned), standing {r['stature_m']:.3f} m "
+                          f"(true {r['true_stature_m']:.3f}), {r['seconds']:.1f} s")
     return 0
 
 
