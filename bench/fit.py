@@ -70,7 +70,9 @@ def order_cell(agreement: float, largest_miss_m: float) -> str:
     true depth gap among those (placement_errors' depth_order_largest_miss_m), cm."""
     if np.isnan(agreement):
         return "-"
-    return f"{100 * agreement:.0f}%" + (f" ({100 * largest_miss_m:.0f} cm)" if agreement < 1 else "")
+    if agreement == 1:
+        return "100%"
+    return f"{np.floor(1000 * agreement) / 10:.1f}% ({100 * largest_miss_m:.0f} cm)"  # never rounded up to 100%
 
 
 def _floor_label(floor: dict) -> str:
