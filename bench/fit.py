@@ -75,6 +75,11 @@ def order_cell(agreement: float, largest_miss_m: float) -> str:
     return f"{np.floor(1000 * agreement) / 10:.1f}% ({100 * largest_miss_m:.0f} cm)"  # never rounded up to 100%
 
 
+def standing_height_m(model: BodyModel, betas: np.ndarray, scale: float = 1.0) -> float:
+    """A body's standing height, metres: its shape's stature (soles to the top of the head) times its scale."""
+    return float(model.stature(betas)) * float(scale)
+
+
 def _floor_label(floor: dict) -> str:
     """The placement table's floor column: yes (one floor), planted feet (a moving camera) or no."""
     if not floor["applied"]:
@@ -120,8 +125,8 @@ def stated_truth(model: BodyModel, scene_dir: Path, state: str, config: FitConfi
     path = scene_dir.with_name(scene_dir.name + ".groundtruth") / f"{state}_body.npz"
     if not path.exists():
         raise SystemExit(f"--state {state}: the fixture {scene_dir.name} has no person {state} (choose scenarios that do)")
-    truth = np.load(path)
-    height = float(model.stature(truth["betas"])) * float(truth["scale"] if "scale" in truth else 1.0)
+    truth = dict(np.load(path))
+    height = standing_height_m(model, truth["betas"], truth.get("scale", 1.0))
     return replace(config, ground=replace(config.ground, person_heights_m=[f"{state}={height:.2f}"]))
 
 
@@ -156,14 +161,14 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
                 scene_scale, scene_scaled = scene_scale_errors(model, fitted, truths, centres)
                 frames = sum(int((~fit.params.interpolated).sum()) for fit in fits)
                 for fit in fits:
-                    errors = joint_errors(model, fit.params, truths[fit.pid])
                     true = truths[fit.pid]
+                    errors = joint_errors(model, fit.params, true)
                     rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
                                  "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
                                  "floor": _floor_label(floor), **placement, **errors, "scene_scale": scene_scale,
                                  "scene_scaled_m": scene_scaled[fit.pid],
-                                 "stature_m": float(model.stature(fit.params.betas)) * float(fit.params.scale),
-                                 "true_stature_m": float(model.stature(true["betas"])) * float(true.get("scale", 1.0))})
+                                 "stature_m": standing_height_m(model, fit.params.betas, fit.params.scale),
+                                 "true_stature_m": standing_height_m(model, true["betas"], true.get("scale", 1.0))})
     return rows
 
 
