@@ -8,7 +8,8 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
 Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
 fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
 the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings;
-`--state p0` gives stage 02 that person's true height, as a user who knows it would state it.
+`--state p0` gives stage 02 that person's true height, as a user who knows it would state it; `--state shapes`
+every person's true body shape (02_smpl_fit.person_shapes).
 
 People are fitted together (02_smpl_fit.ground: one floor for everyone, with a static camera or a
 moving one with several people; planted feet for a moving camera's lone person; `--ground off` fits
@@ -117,11 +118,27 @@ def _fit_section(ground_mode: str, params: str = "") -> dict:
     return {**raw, "ground": {**raw["ground"], "mode": ground_mode}}
 
 
+def true_shape_files(truth: Path, folder: Path) -> list[str]:
+    """Each person's true betas (the fixture's ground truth in ``truth``) written to ``folder``/<pid>.npz;
+    returns 02_smpl_fit.person_shapes entries, PID=PATH."""
+    folder.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for path in sorted(truth.glob("*_body.npz")):
+        pid = path.name.removesuffix("_body.npz")
+        np.savez(folder / f"{pid}.npz", betas=np.load(path)["betas"])
+        entries.append(f"{pid}={folder / f'{pid}.npz'}")
+    return entries
+
+
 def stated_truth(model: BodyModel, scene_dir: Path, state: str, config: FitConfig) -> FitConfig:
     """``config`` with what a user who knows it would state, taken from the fixture's truth: ``state`` a pid,
-    that person's standing height to the cm (02_smpl_fit.ground.person_heights_m), or ``none``."""
+    that person's standing height to the cm (02_smpl_fit.ground.person_heights_m); ``shapes``, every person's
+    body shape (02_smpl_fit.person_shapes); or ``none``."""
     if state == "none":
         return config
+    if state == "shapes":
+        truth = scene_dir.with_name(scene_dir.name + ".groundtruth")
+        return replace(config, person_shapes=true_shape_files(truth, scene_dir.with_name(scene_dir.name + ".shapes")))
     path = scene_dir.with_name(scene_dir.name + ".groundtruth") / f"{state}_body.npz"
     if not path.exists():
         raise SystemExit(f"--state {state}: the fixture {scene_dir.name} has no person {state} (choose scenarios that do)")
@@ -303,7 +320,8 @@ def main() -> int:
                         help="parameter overrides, as make's PARAMS: 02_smpl_fit.weights.robust_scale_3d_m=0.1")
     parser.add_argument("--state", default="none",
                         help="a pid whose true height (to the cm) stage 02 is told, as a user who knows it would "
-                             "state it (02_smpl_fit.ground.person_heights_m); none: nobody's")
+                             "state it (02_smpl_fit.ground.person_heights_m); shapes: every person's true body "
+                             "shape (02_smpl_fit.person_shapes); none: nothing stated")
     args = parser.parse_args()
     torch.set_num_threads(THREADS)
     cache = Path(os.environ.get("GLIMPSE_CACHE", Path.home() / ".cache" / "glimpse")) / "bench_fit"

@@ -9,10 +9,12 @@ protocol) and the same restricted to the never-seen pixels, each beside the two 
 render, bodies in mean colour); per person inside their own masks; the full composite; and the
 hedgehog count (Gaussians with a largest scale above HEDGEHOG_SCALE_M, or a largest / middle
 scale above HEDGEHOG_RATIO) and each person's canonical holes (glimpse.eval.coverage). --pictures
-DIR saves each person's canonical turntable per prior. --placement-from-truth moves each fitted person by
-the one similarity that best aligns its joints to the truth before stage 03: the pose as fitted, the
-placement and size exact (a diagnostic: what a 2D fit's held-out loss owes to where it put people).
---exact-keypoints fits exact keypoints instead of the fixture's noisy ones (a diagnostic: what the noise costs).
+DIR saves each person's canonical turntable per prior. Diagnostics: --placement-from-truth moves each fitted
+person by the one similarity that best aligns its joints to the truth before stage 03: the pose as fitted,
+the placement and size exact (what a 2D fit's held-out loss owes to where it put people).
+--exact-keypoints fits exact keypoints instead of the fixture's noisy ones (what the noise costs).
+--shape-from-truth states every person's true body shape to stage 02 (02_smpl_fit.person_shapes, as a user
+who knows the shapes would): what a 2D fit's loss owes to the shape, which 2D keypoints do not carry.
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, per prior, as a ratio to one forward+backward render of the same
@@ -21,7 +23,8 @@ the prior's share of an iteration is 1 - (ms per iteration with prior none) / (m
 
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
                                     [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
-                                    [--placement-from-truth] [--exact-keypoints] [--pictures DIR] [--keep DIR]
+                                    [--placement-from-truth] [--exact-keypoints] [--shape-from-truth]
+                                    [--pictures DIR] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +62,7 @@ from glimpse.io.images import write_png  # noqa: E402
 from glimpse.render.config import RenderConfig  # noqa: E402
 from tests.stage_helpers import read_json, run  # noqa: E402
 
-from fit import degrade_keypoints  # noqa: E402  (bench/fit.py, beside this file)
+from fit import degrade_keypoints, true_shape_files  # noqa: E402  (bench/fit.py, beside this file)
 
 THREADS = 2
 SEED = 0
@@ -96,22 +100,41 @@ def render_seconds(run_dir: Path) -> tuple[float, int]:
     return statistics.median(times), count
 
 
+@dataclass(frozen=True)
+class Diagnostics:
+    """What of the truth the quality runs are given (each a command-line flag; all off: a plain run)."""
+
+    placement_from_truth: bool = False  # each fitted person moved onto the truth by one similarity
+    exact_keypoints: bool = False  # the fixture's keypoints replaced by exact ones
+    shape_from_truth: bool = False  # every person's true body shape stated to stage 02
+
+    def describe(self) -> str:
+        """The quality table's caption words for the diagnostics on, each starting "; "."""
+        return "".join(words for on, words in (
+            (self.placement_from_truth, "; each moved onto the truth by one similarity (placement from truth)"),
+            (self.exact_keypoints, "; exact keypoints (the fixture's noise taken out)"),
+            (self.shape_from_truth, "; every person's true body shape stated (02_smpl_fit.person_shapes)")) if on)
+
+
 def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float | None, joint_params: str,
               seed: int = SEED, priors: tuple[str, ...] = ("none",),
-              placement_from_truth: bool = False, exact_keypoints: bool = False) -> Iterator[tuple[str, Path]]:
+              diagnostics: Diagnostics = Diagnostics()) -> Iterator[tuple[str, Path]]:
     """Stages 01-05 on a fresh fixture scene, then 06-07 once per prior: yields (prior, run folder) after each
     (the next prior's stage 06 replaces the previous one's outputs)."""
     scene = make_scene(scenario, root / f"{scenario}_{size}_{fit}_{seed}", size, seed=seed)
-    if exact_keypoints:
-        degrade_keypoints(scene, scene.with_name(scene.name + ".groundtruth"),
-                          BodyModel.from_file(BODY_MODEL, dtype=torch.float64), "clean", np.random.default_rng(seed))
+    truth = scene.with_name(scene.name + ".groundtruth")
+    model = BodyModel.from_file(BODY_MODEL, dtype=torch.float64)
+    if diagnostics.exact_keypoints:
+        degrade_keypoints(scene, truth, model, "clean", np.random.default_rng(seed))
     out = root / f"out_{fit}_{seed}"
     params = f"{UPSTREAM_PARAMS} 02_smpl_fit.mode={fit}"
     params += f" 04_bg_pretrain.schedule_scale={bg_schedule}" if bg_schedule else ""
+    if diagnostics.shape_from_truth:
+        params += f" 02_smpl_fit.person_shapes=[{','.join(true_shape_files(truth, root / 'true_shapes'))}]"
     for stage in ("01_sfm", "02_smpl_fit", "03_masks", "04_bg_pretrain", "05_textual_inversion"):
         stage_out = run(stage, scene, out, f"{params} {joint_params}")
-        if stage == "02_smpl_fit" and placement_from_truth:
-            place_as_truth(stage_out / "humans", scene.with_name(scene.name + ".groundtruth"))
+        if stage == "02_smpl_fit" and diagnostics.placement_from_truth:
+            place_as_truth(stage_out / "humans", truth, model)
     for prior in priors:
         kind, _, overrides = prior.partition("@")  # "surface@prior_surface.garments=false": a variant
         for stage in ("06_joint_opt", "07_eval"):
@@ -119,10 +142,9 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
         yield prior, out / f"{scenario}_{size}"
 
 
-def place_as_truth(humans: Path, truth: Path) -> None:
+def place_as_truth(humans: Path, truth: Path, model: BodyModel) -> None:
     """Move each person of stage 02's ``humans`` folder onto the fixture's ground truth in ``truth`` by one
     similarity (glimpse.fit.evaluate.moved_onto_truth), and print it."""
-    model = BodyModel.from_file(BODY_MODEL, dtype=torch.float64)
     for path in sorted(humans.glob("*/body.npz")):
         fitted, true = read_body_params(path), dict(np.load(truth / f"{path.parent.name}_body.npz"))
         moved, move = moved_onto_truth(model, fitted, true)
@@ -169,11 +191,8 @@ def turntables(people: list, picture: Path) -> None:
 
 
 def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | None, seed: int, params: str,
-            priors: tuple[str, ...], pictures: Path | None, placement_from_truth: bool = False,
-            exact_keypoints: bool = False) -> None:
-    moved = "; each moved onto the truth by one similarity (placement from truth)" if placement_from_truth else ""
-    moved += "; exact keypoints (the fixture's noise taken out)" if exact_keypoints else ""
-    print(f"bodies fitted with 02_smpl_fit.mode={fit}{moved}; seed {seed}; stage 04 schedule_scale "
+            priors: tuple[str, ...], pictures: Path | None, diagnostics: Diagnostics = Diagnostics()) -> None:
+    print(f"bodies fitted with 02_smpl_fit.mode={fit}{diagnostics.describe()}; seed {seed}; stage 04 schedule_scale "
           f"{bg_schedule or 'default'}; other parameters: {params or 'pipeline.yaml'}\n")
     print("| scenario | prior | views | humans PSNR | SSIM | LPIPS x100 | seen PSNR | SSIM | LPIPS x100 | "
           "never-seen PSNR | SSIM | LPIPS x100 | per person PSNR (own mask) | composite PSNR | input-view PSNR, "
@@ -183,7 +202,7 @@ def quality(scenarios: list[str], root: Path, fit: str, bg_schedule: float | Non
     baselines = []
     for scenario in scenarios:
         for prior, run_dir in run_scene(scenario, "full", root, fit, bg_schedule, params, seed, priors,
-                                        placement_from_truth, exact_keypoints):
+                                        diagnostics):
             metrics = read_json(run_dir / "07_eval" / "metrics.json")
             report = read_json(run_dir / "06_joint_opt" / "report.json")
             tables = metrics["tables"]
@@ -255,6 +274,8 @@ def main() -> int:
     parser.add_argument("--exact-keypoints", action="store_true",
                         help="replace the fixture's noisy keypoints by exact ones, same frames and confidences "
                              "(a diagnostic: what the keypoints' noise costs)")
+    parser.add_argument("--shape-from-truth", action="store_true",
+                        help="state every person's true body shape to stage 02 (a diagnostic: what the shape costs)")
     parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
@@ -270,7 +291,8 @@ def main() -> int:
         if args.quality:
             print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
             quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,
-                    priors, args.pictures, args.placement_from_truth, args.exact_keypoints)
+                    priors, args.pictures,
+                    Diagnostics(args.placement_from_truth, args.exact_keypoints, args.shape_from_truth))
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
             speed(Path(tmp) / "speed", priors)

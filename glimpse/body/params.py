@@ -102,3 +102,24 @@ def read_body_params(path: Path) -> BodyParams:
             raise GlimpseError(f"{path}: format {found!r}; this reader knows {BODY_PARAMS_FORMAT}")
         return BodyParams(data["frame_ids"], data["betas"], data["global_orient"], data["body_pose"],
                           data["transl"], float(data["scale"]), str(data["body_model"]), data["interpolated"])
+
+
+def read_body_shape(path: Path, num_betas: int, body_model: str) -> np.ndarray:
+    """[num_betas] the ``betas`` of an .npz file stating a person's body shape (an earlier run's ``body.npz``,
+    or any file with that one array); one clear error naming the file and the rule otherwise. A file that
+    names its body model (``body_model``, as body.npz does) must name ``body_model``: betas mean nothing in
+    another model's shape space."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise GlimpseError(f"{path}: cannot read a body shape ({exc}); give an .npz with `betas`") from None
+    with data:
+        if "betas" not in data.files:
+            raise GlimpseError(f"{path}: no `betas` array (a body shape is an .npz with `betas` [{num_betas}])")
+        named = str(data["body_model"]) if "body_model" in data.files else body_model
+        betas = np.asarray(data["betas"], dtype=np.float64)
+    if named != body_model:
+        raise GlimpseError(f"{path}: its betas are for the {named!r} body model; this scene uses {body_model!r}")
+    if betas.shape != (num_betas,) or not np.isfinite(betas).all():
+        raise GlimpseError(f"{path}: `betas` must be {num_betas} finite numbers, found shape {betas.shape}")
+    return betas

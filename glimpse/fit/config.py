@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 from glimpse.errors import ConfigError
@@ -102,6 +103,7 @@ class FitConfig:
     pose_prior_anneal: list[float]
     robust_scale_anneal: list[float]
     ground: GroundConfig
+    person_shapes: list[str]
     overlay: bool
 
 
@@ -126,3 +128,19 @@ def stated_person_heights(g: GroundConfig) -> dict[str, float]:
     if not g.contact_span_s >= 0:
         raise ConfigError(f"02_smpl_fit.ground.contact_span_s must be 0 or more (seconds), found {g.contact_span_s}")
     return heights
+
+
+def stated_person_shapes(config: FitConfig) -> dict[str, Path]:
+    """``person_shapes`` as pid -> the .npz file of that person's body shape; malformed entries are errors (the
+    files are read by the stage, which knows the body model)."""
+    shapes: dict[str, Path] = {}
+    for entry in config.person_shapes:
+        pid, sep, path = str(entry).partition("=")
+        pid, path = pid.strip(), path.strip()
+        if not (sep and pid and path):
+            raise ConfigError(f"02_smpl_fit.person_shapes: {entry!r} is not PID=PATH, PATH an .npz file with the "
+                              f"person's betas (e.g. p0=runs/clip/02_smpl_fit/humans/p0/body.npz)")
+        if pid in shapes:
+            raise ConfigError(f"02_smpl_fit.person_shapes: person {pid!r} is given twice")
+        shapes[pid] = Path(path)
+    return shapes

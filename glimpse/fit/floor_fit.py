@@ -46,7 +46,8 @@ from glimpse.fit.objective import TEMPLATE_SIZE, FitEnergy, FloorContact
 from glimpse.scene import HumanInputs
 
 HIPS, KNEES = [1, 2], [4, 5]  # SMPL joint indices (left, right)
-ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height
+ANCHOR_MODES = ("provided", "keypoints3d")  # people placed metrically: they fix the camera's height (so do people
+# fitted from 2D keypoints with a stated shape: knowing their size, their own fit knows their distance)
 STATIC_CAMERA_TOLERANCE = 1e-6  # world units (relative to the centre's norm + 1): a static camera's centres agree
 TORSO_KEYPOINTS = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")  # a 2D torso axis: hips to shoulders
 TORSO_ITERATIONS = 20  # reweighting rounds of the torso axes' robust fit (converged well before)
@@ -136,7 +137,8 @@ def _place(pending: list[PendingFit], models: BodyModels, cameras: dict[int, Pin
     grounded = near_own_plane(grounded, normal, centre, g.contact_height_m)
     normal = floor_normal(grounded, up_hint, normal_prior_m)
     heights = person_camera_heights(grounded, normal, centre)
-    anchored = np.array([p.mode in ANCHOR_MODES for p in pending])
+    anchored = np.array([p.mode in ANCHOR_MODES or (p.schedule is not None and p.schedule.shape_stated)
+                         for p in pending])
     if (heights <= 0).any():  # nan (no points) compares False
         below = [p.person.pid for p, h in zip(pending, heights) if h <= 0]
         return {"applied": False, "reason": f"the people's feet do not agree on a floor: the camera would stand "
@@ -280,7 +282,7 @@ def _camera_height_from(pending: list[PendingFit], anchored: np.ndarray, measure
     """What set the camera's height above the common floor, in words (ground.json)."""
     anchors = [p.person.pid for p, a in zip(pending, anchored) if a]
     if anchors:
-        return "people placed metrically: " + ", ".join(anchors)
+        return "people placed metrically (3D keypoints, given bodies, stated shapes): " + ", ".join(anchors)
     told = [p.person.pid for p, s in zip(pending, stated) if np.isfinite(s)]
     if told:
         return "the heights stated in 02_smpl_fit.ground.person_heights_m: " + ", ".join(told)
@@ -389,7 +391,8 @@ def _refit(pending: PendingFit, feet: _Feet, soles_body: KeypointBody, g: Ground
     dtype = outcome.state.transl.dtype
     state, plane = outcome.state, None
     if floor is not None or factor != 1.0:
-        state = rescale_about(state, energy.body, torch.as_tensor(feet.centres, dtype=dtype), factor, g.shape_ridge)
+        state = rescale_about(state, energy.body, torch.as_tensor(feet.centres, dtype=dtype), factor, g.shape_ridge,
+                              keep_shape=pending.schedule.shape_stated)
     if floor is not None:
         plane = (torch.as_tensor(floor.normal, dtype=dtype), torch.as_tensor(floor.camera_centre, dtype=dtype),
                  floor.camera_height)

@@ -67,6 +67,7 @@ class FitSchedule:
     hypothesis_joint_speed_m_s: float = 1.0  # 2D: changing hypothesis between frames costs joint speed / this
     hypothesis_rate_hz: float = 8.0  # 2D: ... with frames judged at least 1 / this apart (seconds)
     unseen_limbs_at_rest: bool = False  # 2D: the hypotheses leave limbs no keypoint shows at the global stage's pose
+    shape_stated: bool = False  # the initial state's betas are the person's known shape (person_shapes): held fixed
 
 
 @dataclass
@@ -217,13 +218,18 @@ def fit_track(energy: FitEnergy, initial: FitState, schedule: FitSchedule, who: 
                                                     strict=True)):
         energy.pose_prior_scale, energy.robust_scale_factor = multiplier, robust
         energy.update_depth_reference(state)
-        stages.append(_minimise(energy, state, ["betas", "global_orient", "body_pose", "transl", *_scale(schedule)],
-                                schedule.full_iterations, who, f"full_{step + 1}"))
+        stages.append(_minimise(energy, state, _full_variables(schedule), schedule.full_iterations, who,
+                                f"full_{step + 1}"))
     return FitOutcome(state.detached(), stages)
 
 
 def _scale(schedule: FitSchedule) -> list[str]:
     return ["log_scale"] if schedule.fit_scale else []
+
+
+def _full_variables(schedule: FitSchedule) -> list[str]:
+    """The FitState fields the full and floor stages optimise: all of them but a stated shape's betas."""
+    return [*([] if schedule.shape_stated else ["betas"]), "global_orient", "body_pose", "transl", *_scale(schedule)]
 
 
 SCALE_CANDIDATES = np.geomspace(1e-3, 1e3, 121)  # world units per metre tried by _scale_from_motion
@@ -405,19 +411,23 @@ def _global_stage_2d(energy: FitEnergy, initial: FitState, schedule: FitSchedule
     return state, stage
 
 
-def rescale_about(state: FitState, body: KeypointBody, centre: Tensor, factor: float, ridge: float) -> FitState:
+def rescale_about(state: FitState, body: KeypointBody, centre: Tensor, factor: float, ridge: float,
+                  keep_shape: bool = False) -> FitState:
     """The state moved to ``factor`` times its distance from ``centre`` (a static camera's centre [3], or each
     frame's camera centre [T, 3]) and made ``factor`` times as large, so that it projects to the same pixels in
     every frame: new betas whose rest skeleton (relative to the pelvis) best matches ``factor`` times the old one
     (least squares with ``ridge`` per unit beta^2), the pelvis path scaled about the centre, orientations and pose
-    kept."""
-    offsets = body.joint_shapedirs - body.joint_shapedirs[:1]  # [24, 3, S]: the pelvis-relative skeleton per beta
-    template = body.joint_template - body.joint_template[:1]
+    kept. ``keep_shape`` (a stated shape): the betas are kept, only the pelvis path moves."""
     rest_old = body.rest_joints(state.betas)
-    old = rest_old - rest_old[:1]
-    basis = offsets.reshape(-1, offsets.shape[-1])
-    target = (factor * old - template).reshape(-1)
-    betas = torch.linalg.solve(basis.T @ basis + ridge * torch.eye(basis.shape[1], dtype=basis.dtype), basis.T @ target)
+    if keep_shape:
+        betas = state.betas.clone()
+    else:
+        offsets = body.joint_shapedirs - body.joint_shapedirs[:1]  # [24, 3, S]: the pelvis-relative skeleton per beta
+        template = body.joint_template - body.joint_template[:1]
+        basis = offsets.reshape(-1, offsets.shape[-1])
+        target = (factor * (rest_old - rest_old[:1]) - template).reshape(-1)
+        betas = torch.linalg.solve(basis.T @ basis + ridge * torch.eye(basis.shape[1], dtype=basis.dtype),
+                                   basis.T @ target)
     scale = state.log_scale.exp()
     pelvis_old = scale * rest_old[0] + state.transl  # [T, 3]
     pelvis_new = centre + factor * (pelvis_old - centre)
@@ -431,5 +441,4 @@ def refit_on_floor(energy: FitEnergy, state: FitState, schedule: FitSchedule, it
     energy.pose_prior_scale = schedule.pose_prior_anneal[-1]
     energy.robust_scale_factor = schedule.robust_scale_anneal[-1]
     energy.update_depth_reference(state)
-    return _minimise(energy, state, ["betas", "global_orient", "body_pose", "transl", *_scale(schedule)], iterations,
-                     who, "floor")
+    return _minimise(energy, state, _full_variables(schedule), iterations, who, "floor")

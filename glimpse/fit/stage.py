@@ -21,12 +21,12 @@ import torch
 from glimpse.body.keypoints import keypoint_map
 from glimpse.body.models import BodyModels
 from glimpse.body.motion import interpolate_pose_sequence
-from glimpse.body.params import BodyParams, read_scene_smpl
+from glimpse.body.params import BodyParams, read_body_shape, read_scene_smpl
 from glimpse.cameras.align import rotation_between
 from glimpse.cameras.model import PinholeCamera
 from glimpse.cameras.undistort import scene_undistorter
 from glimpse.errors import GlimpseError
-from glimpse.fit.config import FitConfig, stated_person_heights
+from glimpse.fit.config import FitConfig, stated_person_heights, stated_person_shapes
 from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
@@ -63,6 +63,7 @@ class Fitter:
         self._bodies: dict[tuple[str, int], KeypointBody] = {}
         self._prior: PosePrior | PartedPosePrior | None = None
         self._pose_hypotheses: torch.Tensor | None = None
+        self._shapes: dict[str, np.ndarray] | None = None
 
     def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
         """(frame_ids [T], layout, values [T, K, D+1]) of a person's 3D keypoints (world) or 2D keypoints
@@ -135,20 +136,37 @@ class Fitter:
         """Every person fitted, then those fitted from 2D keypoints placed on one floor (glimpse.fit.floor_fit)
         when 02_smpl_fit.ground allows; ``progress`` wraps the per-person loop (tqdm). Returns the fits and
         the floor's report."""
-        g = self.config.ground
-        unknown = sorted(set(stated_person_heights(g)) - {person.pid for person in people})
-        if unknown:  # before the fits, which take minutes
-            raise GlimpseError(f"02_smpl_fit.ground.person_heights_m names {', '.join(unknown)}, not among the "
-                               f"people fitted ({', '.join(person.pid for person in people)})")
+        heights, fitted = stated_person_heights(self.config.ground), [person.pid for person in people]
+        for key, stated in (("ground.person_heights_m", heights), ("person_shapes", self.stated_shapes)):
+            unknown = sorted(set(stated) - set(fitted))
+            if unknown:  # before the fits, which take minutes
+                raise GlimpseError(f"02_smpl_fit.{key} names {', '.join(unknown)}, not among the people fitted "
+                                   f"({', '.join(fitted)})")
+        both = sorted(set(heights) & set(self.stated_shapes))
+        if both:
+            raise GlimpseError(f"02_smpl_fit: {', '.join(both)} given both a height (ground.person_heights_m) and a "
+                               f"shape (person_shapes); a shape tells the height too: give one")
         pending = [self.start(person) for person in progress(people)]
         floor = place_on_common_floor(pending, self.models, self.cameras, self.config, self.scene.fps)
         return [self.finish(p) for p in pending], floor
+
+    @property
+    def stated_shapes(self) -> dict[str, np.ndarray]:
+        """pid -> betas [num_betas] of the people of 02_smpl_fit.person_shapes, read once."""
+        if self._shapes is None:
+            self._shapes = {pid: read_body_shape(path, self.models[pid].num_betas, self.scene.body_model)
+                            for pid, path in stated_person_shapes(self.config).items()}
+        return self._shapes
 
     def start(self, person: HumanInputs) -> PendingFit:
         """A person's own fit: given bodies read, keypoint fits run (global and full stages)."""
         mode = choose_mode(person, self.config)
         started = time.perf_counter()
+        shape = self.stated_shapes.get(person.pid)
         if mode == "provided":
+            if shape is not None:
+                raise GlimpseError(f"person {person.pid}: 02_smpl_fit.person_shapes states a shape, but the body is "
+                                   f"given (smpl.npz, mode provided), shape and all: drop the entry")
             params = read_scene_smpl(person.smpl, self.scene.body_model).select(sorted(self.cameras))
             if len(params.frame_ids) == 0:
                 raise GlimpseError(f"person {person.pid}: smpl.npz has no frame among the {len(self.cameras)} "
@@ -175,7 +193,7 @@ class Fitter:
         schedule = FitSchedule(c.global_iterations, c.full_iterations, tuple(c.pose_prior_anneal),
                                tuple(c.robust_scale_anneal), self.fit_scale, c.scale_motion_rate_hz,
                                c.pose_hypothesis_iterations, c.pose_hypothesis_joint_speed_m_s,
-                               c.pose_hypothesis_rate_hz, c.unseen_limbs_at_rest)
+                               c.pose_hypothesis_rate_hz, c.unseen_limbs_at_rest, shape is not None)
         try:
             if not track.is_2d:
                 initial = initial_state_3d(body, track, self.prior.mean, self.fit_scale)
@@ -183,6 +201,8 @@ class Fitter:
                 initial = self._initial_from_3d(person, track, body)
             else:
                 initial = initial_state_2d(body, track, self.prior.mean)
+            if shape is not None:
+                initial.betas = torch.as_tensor(shape, dtype=self.dtype)
             outcome = fit_track(energy, initial, schedule, who, self.pose_hypotheses if track.is_2d else None)
         except GlimpseError as exc:
             message = str(exc) if str(exc).startswith(who) else f"{who}: {exc}"
@@ -237,6 +257,8 @@ class Fitter:
                 "absent_frames": [frame_name(f) for f in sorted(self.cameras) if f not in set(params.frame_ids)],
                 "scale_fitted": self.fit_scale, "scale": scale, "metres_per_unit": 1.0 / scale,
                 "pose_prior": self.prior.description, "stages": outcome.stages}
+        if pending.person.pid in self.stated_shapes:
+            info["shape_stated_from"] = str(stated_person_shapes(self.config)[pending.person.pid])
         return params, info
 
     def _track(self, person: HumanInputs, mode: str) -> tuple[Track, str]:
