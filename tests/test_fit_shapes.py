@@ -10,7 +10,7 @@ import torch
 from glimpse.body.model import BodyModel
 from glimpse.body.models import BodyModels
 from glimpse.body.params import BodyParams, read_body_shape, write_body_params
-from glimpse.config import config_from_mapping, load_pipeline_yaml
+from glimpse.config import REPO_ROOT, config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig, stated_person_shapes
 from glimpse.fit.evaluate import body_joints
@@ -31,8 +31,9 @@ def _config(**overrides) -> FitConfig:
 
 
 def test_shape_entries_and_files_are_checked_with_one_clear_error(model, tmp_path):
-    assert stated_person_shapes(_config(person_shapes=[" p0 = a.npz", "p1=b/c.npz"])) == {
-        "p0": tmp_path.__class__("a.npz"), "p1": tmp_path.__class__("b/c.npz")}
+    # relative to the repository, as every path parameter
+    assert stated_person_shapes(_config(person_shapes=[" p0 = a.npz", f"p1={tmp_path / 'c.npz'}"])) == {
+        "p0": REPO_ROOT / "a.npz", "p1": tmp_path / "c.npz"}
     for entries, message in ((["p0"], "not PID=PATH"), (["p0="], "not PID=PATH"), (["=a.npz"], "not PID=PATH"),
                              (["p0=a.npz", "p0=b.npz"], "given twice")):
         with pytest.raises(ConfigError, match=message):

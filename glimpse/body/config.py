@@ -33,10 +33,7 @@ class BodyConfig:
 
 def _existing(path_text: str, parameter: str) -> Path:
     """A model file as an absolute path (relative paths are relative to the repository); missing: an error."""
-    from glimpse.config import REPO_ROOT
-
-    path = Path(path_text).expanduser()
-    path = path if path.is_absolute() else REPO_ROOT / path
+    path = repository_path(path_text)
     if not path.is_file():
         raise GlimpseError(
             f"{parameter}: no body model file at {path}. Give the free model "
@@ -51,17 +48,31 @@ def resolve_model_path(config: BodyConfig) -> Path:
     return _existing(config.model_path, "body.model_path")
 
 
+def pid_path_entries(entries: list[str], parameter: str, example: str) -> dict[str, str]:
+    """PID=PATH ``entries`` of the list parameter ``parameter`` as pid -> path text (not checked on disk); an
+    entry without both parts, or a pid given twice, is an error (``example`` shows one right entry)."""
+    paths: dict[str, str] = {}
+    for entry in entries:
+        pid, sep, path = str(entry).partition("=")
+        if not sep or not pid.strip() or not path.strip():
+            raise ConfigError(f"{parameter}: {entry!r} is not PID=PATH (e.g. {example})")
+        if pid.strip() in paths:
+            raise ConfigError(f"{parameter}: person {pid.strip()!r} is given twice")
+        paths[pid.strip()] = path.strip()
+    return paths
+
+
+def repository_path(path_text: str) -> Path:
+    """A path parameter as an absolute path: absolute as given (``~`` expanded), else relative to the repository."""
+    from glimpse.config import REPO_ROOT
+
+    path = Path(path_text).expanduser()
+    return path if path.is_absolute() else REPO_ROOT / path
+
+
 def person_model_files(config: BodyConfig) -> dict[str, str]:
     """``body.person_model_paths`` as pid -> path text (not checked on disk); malformed entries are errors."""
-    files: dict[str, str] = {}
-    for entry in config.person_model_paths:
-        pid, sep, path = entry.partition("=")
-        if not sep or not pid.strip() or not path.strip():
-            raise ConfigError(f"body.person_model_paths: {entry!r} is not PID=PATH (e.g. p0=/smpl/SMPL_MALE.pkl)")
-        if pid.strip() in files:
-            raise ConfigError(f"body.person_model_paths: person {pid.strip()!r} is given twice")
-        files[pid.strip()] = path.strip()
-    return files
+    return pid_path_entries(config.person_model_paths, "body.person_model_paths", "p0=/smpl/SMPL_MALE.pkl")
 
 
 def resolve_person_model_paths(config: BodyConfig) -> dict[str, Path]:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from glimpse.body.config import pid_path_entries, repository_path
 from glimpse.errors import ConfigError
 
 STATED_HEIGHT_RANGE_M = (0.5, 2.5)  # a person's standing height, metres: outside this a stated one is a typo
@@ -131,16 +132,9 @@ def stated_person_heights(g: GroundConfig) -> dict[str, float]:
 
 
 def stated_person_shapes(config: FitConfig) -> dict[str, Path]:
-    """``person_shapes`` as pid -> the .npz file of that person's body shape; malformed entries are errors (the
-    files are read by the stage, which knows the body model)."""
-    shapes: dict[str, Path] = {}
-    for entry in config.person_shapes:
-        pid, sep, path = str(entry).partition("=")
-        pid, path = pid.strip(), path.strip()
-        if not (sep and pid and path):
-            raise ConfigError(f"02_smpl_fit.person_shapes: {entry!r} is not PID=PATH, PATH an .npz file with the "
-                              f"person's betas (e.g. p0=runs/clip/02_smpl_fit/humans/p0/body.npz)")
-        if pid in shapes:
-            raise ConfigError(f"02_smpl_fit.person_shapes: person {pid!r} is given twice")
-        shapes[pid] = Path(path)
-    return shapes
+    """``person_shapes`` as pid -> the .npz file of that person's body shape (absolute, or relative to the
+    repository, as every path parameter); malformed entries are errors (the files are read by the stage, which
+    knows the body model)."""
+    entries = pid_path_entries(config.person_shapes, "02_smpl_fit.person_shapes",
+                               "p0=runs/clip/02_smpl_fit/humans/p0/body.npz, an .npz with the person's betas")
+    return {pid: repository_path(path) for pid, path in entries.items()}
