@@ -1,5 +1,5 @@
 """Body shapes the user knows (02_smpl_fit.person_shapes): read with clear errors, held fixed in the fit, and
-acting as the person's stated height on the common floor."""
+the person placed metrically on the common floor."""
 
 from __future__ import annotations
 
