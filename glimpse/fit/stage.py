@@ -14,6 +14,7 @@ import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -64,6 +65,7 @@ class Fitter:
         self._prior: PosePrior | PartedPosePrior | None = None
         self._pose_hypotheses: torch.Tensor | None = None
         self._shapes: dict[str, np.ndarray] | None = None
+        self._shape_files: dict[str, Path] = {}
 
     def observed(self, person: HumanInputs, mode: str) -> tuple[np.ndarray, str, np.ndarray]:
         """(frame_ids [T], layout, values [T, K, D+1]) of a person's 3D keypoints (world) or 2D keypoints
@@ -154,8 +156,9 @@ class Fitter:
     def stated_shapes(self) -> dict[str, np.ndarray]:
         """pid -> betas [num_betas] of the people of 02_smpl_fit.person_shapes, read once."""
         if self._shapes is None:
+            self._shape_files = stated_person_shapes(self.config)
             self._shapes = {pid: read_body_shape(path, self.models[pid].num_betas, self.scene.body_model)
-                            for pid, path in stated_person_shapes(self.config).items()}
+                            for pid, path in self._shape_files.items()}
         return self._shapes
 
     def start(self, person: HumanInputs) -> PendingFit:
@@ -258,7 +261,7 @@ class Fitter:
                 "scale_fitted": self.fit_scale, "scale": scale, "metres_per_unit": 1.0 / scale,
                 "pose_prior": self.prior.description, "stages": outcome.stages}
         if pending.person.pid in self.stated_shapes:
-            info["shape_stated_from"] = str(stated_person_shapes(self.config)[pending.person.pid])
+            info["shape_stated_from"] = str(self._shape_files[pending.person.pid])
         return params, info
 
     def _track(self, person: HumanInputs, mode: str) -> tuple[Track, str]:
