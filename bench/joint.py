@@ -15,6 +15,8 @@ the placement and size exact (what a 2D fit's held-out loss owes to where it put
 --exact-keypoints fits exact keypoints instead of the fixture's noisy ones (what the noise costs).
 --shape-from-truth states every person's true body shape to stage 02 (02_smpl_fit.person_shapes, as a user
 who knows the shapes would): what a 2D fit's loss owes to the shape, which 2D keypoints do not carry.
+--scene-scale S moves every fitted person about the camera by the factor S after stage 02 (each joint x to
+c + S (x - c)): the same pixels in the input views, what a scene scale S off costs the held-out views.
 
 Speed (default): iterations per second of stage 06's training loop (2 threads) at small and full
 size on a short schedule, per prior, as a ratio to one forward+backward render of the same
@@ -51,7 +53,7 @@ from glimpse.body.params import read_body_params, write_body_params  # noqa: E40
 from glimpse.cameras.model import render_camera  # noqa: E402
 from glimpse.eval.coverage import CoverageConfig, canonical_hole_share  # noqa: E402
 from glimpse.eval.renders import canonical_turntable  # noqa: E402
-from glimpse.fit.evaluate import joint_errors, moved_onto_truth  # noqa: E402
+from glimpse.fit.evaluate import joint_errors, moved_onto_truth, scaled_about_cameras  # noqa: E402
 from glimpse.fixtures.scenes import make_scene  # noqa: E402
 from glimpse.gaussians.model import GaussianModel  # noqa: E402
 from glimpse.gaussians.ply import read_gaussians_ply  # noqa: E402
@@ -107,13 +109,16 @@ class Diagnostics:
     placement_from_truth: bool = False  # each fitted person moved onto the truth by one similarity
     exact_keypoints: bool = False  # the fixture's keypoints replaced by exact ones
     shape_from_truth: bool = False  # every person's true body shape stated to stage 02
+    scene_scale: float = 1.0  # every fitted person moved about the camera by this factor (1: not moved)
 
     def describe(self) -> str:
         """The quality table's caption words for the diagnostics on, each starting "; "."""
         return "".join(words for on, words in (
             (self.placement_from_truth, "; each moved onto the truth by one similarity (placement from truth)"),
             (self.exact_keypoints, "; exact keypoints (the fixture's noise taken out)"),
-            (self.shape_from_truth, "; every person's true body shape stated (02_smpl_fit.person_shapes)")) if on)
+            (self.shape_from_truth, "; every person's true body shape stated (02_smpl_fit.person_shapes)"),
+            (self.scene_scale != 1.0, f"; every person moved about the camera by {self.scene_scale:g} (scene scale)"))
+            if on)
 
 
 def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float | None, joint_params: str,
@@ -123,7 +128,8 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
     (the next prior's stage 06 replaces the previous one's outputs)."""
     scene = make_scene(scenario, root / f"{scenario}_{size}_{fit}_{seed}", size, seed=seed)
     truth = scene.with_name(scene.name + ".groundtruth")
-    needs_model = diagnostics.exact_keypoints or diagnostics.placement_from_truth  # plain runs load none
+    needs_model = (diagnostics.exact_keypoints or diagnostics.placement_from_truth
+                   or diagnostics.scene_scale != 1.0)  # plain runs load none
     model = BodyModel.from_file(BODY_MODEL, dtype=torch.float64) if needs_model else None
     if diagnostics.exact_keypoints:
         degrade_keypoints(scene, truth, model, "clean", np.random.default_rng(seed))
@@ -136,6 +142,9 @@ def run_scene(scenario: str, size: str, root: Path, fit: str, bg_schedule: float
         stage_out = run(stage, scene, out, f"{params} {joint_params}")
         if stage == "02_smpl_fit" and diagnostics.placement_from_truth:
             place_as_truth(stage_out / "humans", truth, model)
+        if stage == "02_smpl_fit" and diagnostics.scene_scale != 1.0:
+            scale_about_camera(stage_out / "humans", stage_out.parent / "01_sfm" / "cameras.json", model,
+                               diagnostics.scene_scale)
     for prior in priors:
         kind, _, overrides = prior.partition("@")  # "surface@prior_surface.garments=false": a variant
         for stage in ("06_joint_opt", "07_eval"):
@@ -154,6 +163,17 @@ def place_as_truth(humans: Path, truth: Path, model: BodyModel) -> None:
         print(f"placement from truth: {path.parent.name} scaled {move.scale:.4f}, turned "
               f"{np.degrees(Rotation.from_matrix(move.rotation).magnitude()):.2f} deg, mean joint error "
               f"{before * 100:.1f} -> {after * 100:.1f} cm", flush=True)
+
+
+def scale_about_camera(humans: Path, cameras_json: Path, model: BodyModel, factor: float) -> None:
+    """Move each person of stage 02's ``humans`` folder about its frame's camera centre by ``factor``
+    (glimpse.fit.evaluate.scaled_about_cameras): the same pixels in the input views."""
+    _, _, cameras = read_cameras_json(cameras_json)
+    for path in sorted(humans.glob("*/body.npz")):
+        fitted = read_body_params(path)
+        centres = np.stack([cameras[int(f)].centre for f in fitted.frame_ids])
+        write_body_params(path, scaled_about_cameras(model, fitted, centres, factor))
+        print(f"scene scale: {path.parent.name} moved about the camera by {factor:g}", flush=True)
 
 
 def hedgehogs(run_dir: Path) -> tuple[int, int, int]:
@@ -277,6 +297,9 @@ def main() -> int:
                              "(a diagnostic: what the keypoints' noise costs)")
     parser.add_argument("--shape-from-truth", action="store_true",
                         help="state every person's true body shape to stage 02 (a diagnostic: what the shape costs)")
+    parser.add_argument("--scene-scale", type=float, default=1.0,
+                        help="move every fitted person about the camera by this factor before stage 03 (a diagnostic: "
+                             "what the one scale a single view cannot tell costs; 1.01 = 1%% farther and larger)")
     parser.add_argument("--pictures", type=Path, default=None, help="save canonical turntables here")
     parser.add_argument("--params", default="", help="parameter overrides of the quality runs, as make's PARAMS")
     parser.add_argument("--bg-schedule", type=float, default=None,
@@ -293,7 +316,8 @@ def main() -> int:
             print("### stage 06 per prior: held-out quality at full size, bodies fitted to keypoints\n")
             quality(args.scenarios.split(","), Path(tmp), args.fit, args.bg_schedule, args.seed, args.params,
                     priors, args.pictures,
-                    Diagnostics(args.placement_from_truth, args.exact_keypoints, args.shape_from_truth))
+                    Diagnostics(args.placement_from_truth, args.exact_keypoints, args.shape_from_truth,
+                                args.scene_scale))
         if not args.no_speed:
             print(f"\n### stage 06 speed on demo ({THREADS} threads, schedule_scale {SPEED_SCHEDULE})\n")
             speed(Path(tmp) / "speed", priors)

@@ -17,7 +17,8 @@ from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import body_joints, joint_errors, moved_onto_truth, placement_errors, scene_scale_errors
+from glimpse.fit.evaluate import (body_joints, joint_errors, moved_onto_truth, placement_errors, scaled_about_cameras,
+                                  scene_scale_errors)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
@@ -305,6 +306,21 @@ def test_a_body_moved_by_a_similarity_is_moved_back_onto_the_truth(model):
     bent = replace(placed, body_pose=truth.body_pose + 0.1)
     errors = joint_errors(model, moved_onto_truth(model, bent, _truth(truth))[0], _truth(truth))
     assert errors["mpjpe_m"] == pytest.approx(errors["sequence_aligned_m"], rel=1e-6)
+
+
+def test_a_body_scaled_about_the_cameras_projects_to_the_same_pixels(model):
+    """The scene-scale diagnostic (bench/joint.py): each joint moves to c + s (x - c) about its frame's camera centre,
+    so its direction from the camera, and with it its pixel, is unchanged; scene_scale_errors finds 1 / s back."""
+    truth = _known_person(model, 6)
+    centres = np.array([[0.3, 1.5, -2.5]] * 3 + [[0.5, 1.4, -2.0]] * 3)  # a camera that moved once
+    scaled = scaled_about_cameras(model, truth, centres, 1.03)
+    before = body_joints(model, truth.betas, truth.global_orient, truth.body_pose, truth.transl, truth.scale)
+    after = body_joints(model, scaled.betas, scaled.global_orient, scaled.body_pose, scaled.transl, scaled.scale)
+    np.testing.assert_allclose(after, centres[:, None] + 1.03 * (before - centres[:, None]), atol=1e-9)
+    assert scaled.scale == pytest.approx(1.03 * truth.scale)
+    scale, _ = scene_scale_errors(model, {"p0": scaled}, {"p0": _truth(truth)},
+                                  {int(f): c for f, c in zip(truth.frame_ids, centres)})
+    assert scale == pytest.approx(1 / 1.03, abs=1e-3)
 
 
 def test_the_masks_put_in_front_whoever_owns_the_overlap_of_two_skeletons():

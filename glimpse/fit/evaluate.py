@@ -75,6 +75,17 @@ def moved_onto_truth(model: BodyModel, fitted: BodyParams,
     return replace(fitted, global_orient=orient, transl=move.apply(joints[:, 0]) - unmoved_root, scale=scale), move
 
 
+def scaled_about_cameras(model: BodyModel, fitted: BodyParams, centres: np.ndarray, factor: float) -> BodyParams:
+    """``fitted`` moved about each frame's camera centre (``centres`` [T, 3], world, one per frame of ``fitted``) by
+    ``factor``: every joint x of frame t to c_t + factor (x - c_t), the body scaled with it. It projects to the same
+    pixels in every frame: the one change of a scene that 2D keypoints cannot see (scene_scale_errors)."""
+    roots = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)[:, 0]
+    scale = fitted.scale * factor
+    unmoved_root = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose,
+                               np.zeros_like(fitted.transl), scale)[:, 0]
+    return replace(fitted, transl=centres + factor * (roots - centres) - unmoved_root, scale=scale)
+
+
 def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
                      camera_centres: dict[int, np.ndarray]) -> dict[str, float]:
     """How people are placed relative to each other, over every pair and the frames both were fitted in:
