@@ -70,9 +70,7 @@ def moved_onto_truth(model: BodyModel, fitted: BodyParams,
     joints = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)
     move = umeyama(joints[~fitted.interpolated].reshape(-1, 3), true_joints(model, fitted, truth).reshape(-1, 3))
     orient = (Rotation.from_matrix(move.rotation) * Rotation.from_rotvec(fitted.global_orient)).as_rotvec()
-    scale = fitted.scale * move.scale
-    unmoved_root = body_joints(model, fitted.betas, orient, fitted.body_pose, np.zeros_like(fitted.transl), scale)[:, 0]
-    return replace(fitted, global_orient=orient, transl=move.apply(joints[:, 0]) - unmoved_root, scale=scale), move
+    return _rooted_at(model, fitted, orient, fitted.scale * move.scale, move.apply(joints[:, 0])), move
 
 
 def scaled_about_cameras(model: BodyModel, fitted: BodyParams, centres: np.ndarray, factor: float) -> BodyParams:
@@ -80,10 +78,16 @@ def scaled_about_cameras(model: BodyModel, fitted: BodyParams, centres: np.ndarr
     ``factor``: every joint x of frame t to c_t + factor (x - c_t), the body scaled with it. It projects to the same
     pixels in every frame: the one change of a scene that 2D keypoints cannot see (scene_scale_errors)."""
     roots = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose, fitted.transl, fitted.scale)[:, 0]
-    scale = fitted.scale * factor
-    unmoved_root = body_joints(model, fitted.betas, fitted.global_orient, fitted.body_pose,
-                               np.zeros_like(fitted.transl), scale)[:, 0]
-    return replace(fitted, transl=centres + factor * (roots - centres) - unmoved_root, scale=scale)
+    return _rooted_at(model, fitted, fitted.global_orient, fitted.scale * factor, centres + factor * (roots - centres))
+
+
+def _rooted_at(model: BodyModel, fitted: BodyParams, global_orient: np.ndarray, scale: float,
+               roots: np.ndarray) -> BodyParams:
+    """``fitted`` with ``global_orient`` [T, 3] and ``scale``, translated so that its root joint lies at ``roots``
+    [T, 3] (world) in every frame; pose and shape kept."""
+    unmoved_root = body_joints(model, fitted.betas, global_orient, fitted.body_pose, np.zeros_like(fitted.transl),
+                               scale)[:, 0]
+    return replace(fitted, global_orient=global_orient, transl=roots - unmoved_root, scale=scale)
 
 
 def placement_errors(model: BodyModel, fitted: dict[str, BodyParams], truth: dict[str, dict[str, np.ndarray]],
