@@ -26,7 +26,7 @@ the prior's share of an iteration is 1 - (ms per iteration with prior none) / (m
     .venv/bin/python bench/joint.py [--quality] [--scenarios demo,sparse] [--priors none,surface]
                                     [--fit keypoints2d] [--seed 1] [--bg-schedule 0.02] [--no-speed]
                                     [--placement-from-truth] [--exact-keypoints] [--shape-from-truth]
-                                    [--pictures DIR] [--keep DIR]
+                                    [--scene-scale S] [--pictures DIR] [--keep DIR]
 """
 
 from __future__ import annotations
