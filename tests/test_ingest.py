@@ -152,9 +152,14 @@ def test_ingest_writes_a_valid_scene_with_both_people(demo_video, ingested) -> N
         assert (keypoints.keypoints[..., :2][confidence == 0] == 0).all()  # missing joints are not invented
     on_disk = json.loads((scene_dir / REPORT_FILE).read_text())
     assert on_disk["people"].keys() == report["people"].keys() and on_disk["frames"] == len(truth.frame_ids)
-    for person in on_disk["people"].values():  # frames whose left/right labels were exchanged (glimpse.ingest.sides)
+    for pid, person in on_disk["people"].items():  # frames whose left/right labels were exchanged (glimpse.ingest.sides)
         assert all(person["first_frame"] <= f <= person["last_frame"]
                    for f in person["sides_exchanged"] + person["legs_exchanged"])
+        # frames given a mask from the plate inside a gap (glimpse.ingest.gap_masks) carry no keypoints
+        keypoints = read_keypoints2d(scene.humans[pid].keypoints2d)
+        rows = [keypoints.frame_ids.tolist().index(f) for f in person["masks_from_foreground"]]
+        assert not keypoints.keypoints[rows, :, 2].any()
+        assert all(person["first_frame"] < f < person["last_frame"] for f in person["masks_from_foreground"])
     preview = read_mp4(scene_dir / PREVIEW_FILE)
     assert preview.shape[0] == len(truth.frame_ids)
 

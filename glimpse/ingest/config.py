@@ -52,6 +52,12 @@ class IngestConfig:
     foreground_close: float
     foreground_person_aspect: float
     foreground_rounds: int
+    gap_masks: bool
+    gap_mask_max_frames: int
+    gap_mask_box_grow: float
+    gap_mask_min_share: float
+    gap_mask_max_share: float
+    gap_mask_plate_margin: float
     plate_frames: int
     motion_threshold: float
     motion_sample_frames: int

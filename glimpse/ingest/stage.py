@@ -11,7 +11,9 @@ Three streaming passes (frames decoded one at a time; the tracking pass also hol
 3. write: the tracks kept (long, large and upright enough: glimpse.ingest.upright); per person its masks and
    COCO-17 keypoints (left and right made consistent along the track, frames
    squeezed at the border and joints hidden behind others left out: glimpse.ingest.sides, glimpse.ingest.truncation,
-   glimpse.ingest.occlusion), the preview video and the tracks report
+   glimpse.ingest.occlusion), on a fixed camera masks for the frames inside a track's gap from what differs from
+   a plate without the people (glimpse.ingest.gap_masks; the frames decoded twice more, for that plate and for
+   the masks), the preview video and the tracks report
    (``ingest/preview.mp4``, ``ingest/tracks.json``; the scene format ignores them); scene.yaml's overrides
    carry stage 02's settings for a detector's keypoints (``fit_overrides``).
 
@@ -29,6 +31,7 @@ import shutil
 import time
 from collections.abc import Callable, Iterator
 from functools import partial
+from math import ceil
 from pathlib import Path
 
 import cv2
@@ -51,6 +54,8 @@ from glimpse.ingest.sides import exchange_legs, exchange_sides, legs_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
+from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, mask_box, people_free_plate,
+                                      with_mask_frames)
 from glimpse.ingest.occlusion import joints_on_others
 from glimpse.ingest.observation import Track
 from glimpse.ingest.tracker import Tracker
@@ -160,6 +165,51 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                                   [f for f, e in zip(track.frames, squeezed) if e],
                                   [f for f, e in zip(track.frames, legs) if e], sorted(track.looked_again)))
     return people, dropped
+
+
+def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: list[PersonTrack],
+                   work: Path) -> tuple[list[PersonTrack], dict[int, list[tuple[int, np.ndarray]]]]:
+    """``people`` with masks in the frames inside their tracks' gaps where what differs from the plate is theirs
+    (glimpse.ingest.gap_masks; their keypoints there all at confidence 0), the frames decoded again; and those
+    masks, frame id -> [(label, flat indices of its pixels in the tracking-size labels)]. The labels in ``work``
+    stay as tracking wrote them (an interrupted ingest run again sees the same). Two more passes over the frames:
+    one for the plate without the people (glimpse.ingest.gap_masks.people_free_plate), one for the masks."""
+    gaps = {person.pid: gap_frames(person.frames, config.gap_mask_max_frames) for person in people}
+    needed = {gap.frame_id for person_gaps in gaps.values() for gap in person_gaps}
+    added: dict[str, dict[int, np.ndarray]] = {person.pid: {} for person in people}  # frame id -> scene box
+    additions: dict[int, list[tuple[int, np.ndarray]]] = {}
+    if not needed:
+        return people, additions
+    track_size = (survey.track_width, survey.track_height)
+    sampled = set(list(survey.chosen.values())[::max(1, ceil(len(survey.chosen) / config.plate_frames))])
+    samples = [(resized(rgb, track_size), _read_labels(work, frame_id) > 0)
+               for frame_id, rgb in _chosen_frames(video, survey, "a plate without the people") if frame_id in sampled]
+    plate = people_free_plate(np.stack([image for image, _ in samples]), np.stack([found for _, found in samples]),
+                              survey.plate, round(config.gap_mask_plate_margin * survey.track_height))
+    for frame_id, rgb in _chosen_frames(video, survey, "masks in the tracks' gaps"):
+        if frame_id not in needed:
+            continue
+        image, labels = resized(rgb, track_size), _read_labels(work, frame_id)
+        for person in people:
+            for gap in (g for g in gaps[person.pid] if g.frame_id == frame_id):
+                around = [_read_labels(work, f) == person.label for f in (gap.before, gap.after)]
+                if not all(mask.any() for mask in around):
+                    continue
+                box = interpolated_box(*(mask_box(mask) for mask in around), gap.fraction, config.gap_mask_box_grow)
+                mine = gap_mask(image, plate, labels, box, float(np.mean([m.sum() for m in around])), config)
+                if mine is not None:
+                    labels[mine] = person.label
+                    additions.setdefault(frame_id, []).append((person.label, np.flatnonzero(mine)))
+                    added[person.pid][frame_id] = _to_scene_pixels(mask_box(mine).reshape(2, 2), survey).reshape(4)
+    return [with_mask_frames(person, added[person.pid]) for person in people], additions
+
+
+def _labels_with(work: Path, additions: dict[int, list[tuple[int, np.ndarray]]], frame_id: int) -> np.ndarray:
+    """A frame's tracking-size labels (``work``) with the masks ``_masks_in_gaps`` added."""
+    labels = _read_labels(work, frame_id)
+    for label, pixels in additions.get(frame_id, []):
+        labels.flat[pixels] = label
+    return labels
 
 
 def _median_height(track: Track) -> float:
@@ -306,17 +356,20 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
                            + (f"; {dropped['upside_down']} track(s) stood upside down (a video turned over without "
                               "rotation metadata? ingest.track_max_upside_down)" if dropped["upside_down"] else "")
                            + "; Glimpse reconstructs people, so it needs a video with at least one person in view")
+    additions: dict[int, list[tuple[int, np.ndarray]]] = {}
+    if config.gap_masks and survey.plate is not None:
+        people, additions = _masks_in_gaps(video, survey, config, people, work)
+    labels_of = partial(_labels_with, work, additions)
     if survey.focal_35mm is not None:  # a moving camera's too: SfM keeps it (01_sfm.estimate_focal: its own)
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
     for person in people:
         writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints, person.relative3d)
         for frame_id in person.frames:
-            labels = _read_labels(work, frame_id)
-            writer.person_mask(person.pid, frame_id, _person_mask(labels, person.label, survey))
+            writer.person_mask(person.pid, frame_id, _person_mask(labels_of(frame_id), person.label, survey))
     if config.preview:
         frames = ((fid, resized(rgb, (survey.width, survey.height)),
-                   _scene_labels(_read_labels(work, fid), people, survey))
+                   _scene_labels(labels_of(fid), people, survey))
                   for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
         write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
                   survey.fps)

@@ -1,0 +1,109 @@
+"""Masks for the frames inside a track's gap, from what differs from a fixed camera's plate (glimpse.ingest.gap_masks):
+which frames, which box, which pixels, when none, and how the frames join the person's track. The whole ingest runs
+on rendered videos in test_ingest.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from glimpse.ingest.config import load_ingest_config
+from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, mask_box, people_free_plate,
+                                      with_mask_frames)
+from glimpse.ingest.report import PersonTrack
+
+SIZE = (120, 200)  # H, W
+GREY, FRONT, BEHIND = 100, 200, 30  # 8-bit levels of the plate and of two people's clothes
+
+
+def test_gap_frames_are_the_missing_frames_of_short_gaps() -> None:
+    frames = gap_frames([0, 1, 2, 5, 6, 20], max_frames=3)
+    assert [(g.frame_id, g.before, g.after) for g in frames] == [(3, 2, 5), (4, 2, 5)]  # 7-19: 13 frames, too long
+    assert [g.fraction for g in frames] == pytest.approx([1 / 3, 2 / 3])
+    assert gap_frames([4, 5, 6], max_frames=30) == []
+
+
+def test_interpolated_box_moves_over_time_and_grows_about_its_centre() -> None:
+    before, after = np.array([0.0, 0.0, 10.0, 20.0]), np.array([20.0, 0.0, 30.0, 20.0])
+    np.testing.assert_allclose(interpolated_box(before, after, 0.5, 1.0), [10.0, 0.0, 20.0, 20.0])
+    np.testing.assert_allclose(interpolated_box(before, after, 0.25, 2.0), [0.0, -10.0, 20.0, 30.0])
+
+
+def _scene() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A plate, a frame with one person in front (labelled) half hiding another (not found), the labels, and the
+    hidden person's visible pixels."""
+    plate = np.full((*SIZE, 3), GREY, np.uint8)
+    image = plate.copy()
+    behind = np.zeros(SIZE, bool)
+    behind[20:100, 60:100] = True
+    front = np.zeros(SIZE, bool)
+    front[10:110, 85:125] = True
+    image[behind] = BEHIND
+    image[front] = FRONT
+    labels = np.zeros(SIZE, np.uint16)
+    labels[front] = 1
+    return plate, image, labels, behind & ~front
+
+
+def test_the_mask_is_what_differs_from_the_plate_and_nobody_holds() -> None:
+    plate, image, labels, visible = _scene()
+    config = load_ingest_config()
+    box = np.array([55.0, 15.0, 105.0, 105.0])
+    mine = gap_mask(image, plate, labels, box, expected_area=float(visible.sum()), config=config)
+    assert mine is not None and not (mine & (labels > 0)).any()
+    iou = (mine & visible).sum() / (mine | visible).sum()
+    assert iou > 0.95
+    # the box bounds it: the part of the hidden person outside the box is not taken
+    narrow = gap_mask(image, plate, labels, np.array([70.0, 15.0, 105.0, 105.0]), float(visible.sum()), config)
+    assert narrow is not None and not narrow[:, :69].any()
+
+
+def test_no_mask_where_too_little_or_too_much_differs() -> None:
+    plate, image, labels, visible = _scene()
+    config = load_ingest_config()
+    box = np.array([55.0, 15.0, 105.0, 105.0])
+    area = float(visible.sum())
+    assert gap_mask(image, plate, labels, box, area / (config.gap_mask_min_share * 0.9), config) is None  # hidden
+    assert gap_mask(image, plate, labels, box, area / (config.gap_mask_max_share * 1.1), config) is None  # crowded
+    assert gap_mask(plate.copy(), plate, labels, box, area, config) is None  # nothing differs
+
+
+def test_the_plate_without_the_people_shows_where_someone_mostly_stood() -> None:
+    """A person stands in one place in 6 of 10 sampled frames (a plain median shows them there) and someone else
+    never leaves another place: the plate from the pixels nobody covers shows the background at the first and
+    falls back to the given plate at the second."""
+    background = np.random.default_rng(0).integers(0, 256, (*SIZE, 3), dtype=np.uint8)
+    samples = np.repeat(background[None], 10, axis=0)
+    people = np.zeros((10, *SIZE), bool)
+    people[:6, 20:80, 30:60] = True
+    samples[:6, 20:80, 30:60] = FRONT
+    people[:, 20:80, 150:170] = True
+    samples[:, 20:80, 150:170] = BEHIND
+    median = np.median(samples, axis=0).astype(np.uint8)
+    assert (median[20:80, 30:60] == FRONT).all()  # the plain median: the person
+    fallback = np.full((*SIZE, 3), GREY, np.uint8)
+    plate = people_free_plate(samples, people, fallback, margin_px=2, rows_at_once=16)
+    np.testing.assert_array_equal(plate[20:80, 30:60], background[20:80, 30:60])
+    assert (plate[20:80, 150:170] == GREY).all()  # nobody ever left: the given plate
+    outside = np.ones(SIZE, bool)
+    outside[18:82, 28:62] = outside[18:82, 148:172] = False
+    np.testing.assert_array_equal(plate[outside], background[outside])
+
+
+def test_mask_box() -> None:
+    mask = np.zeros(SIZE, bool)
+    mask[5:9, 20:31] = True
+    np.testing.assert_array_equal(mask_box(mask), [20, 5, 30, 8])
+
+
+def test_frames_with_a_mask_join_the_track_in_order_without_keypoints() -> None:
+    keypoints = np.ones((3, 17, 3))
+    person = PersonTrack("p0", 1, [2, 3, 7], keypoints, np.ones((3, 17, 4)), np.arange(12.0).reshape(3, 4), [], [])
+    boxes = {4: np.full(4, 40.0), 6: np.full(4, 60.0)}
+    joined = with_mask_frames(person, boxes)
+    assert joined.frames == [2, 3, 4, 6, 7] and joined.masks_from_foreground == [4, 6]
+    np.testing.assert_array_equal(joined.keypoints[[0, 1, 4]], keypoints)
+    assert not joined.keypoints[[2, 3]].any() and not joined.relative3d[[2, 3]].any()
+    np.testing.assert_array_equal(joined.boxes[[2, 3]], [boxes[4], boxes[6]])
+    np.testing.assert_array_equal(joined.boxes[[0, 1, 4]], person.boxes)
+    assert with_mask_frames(person, {}) is person
