@@ -186,17 +186,27 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
                for frame_id, rgb in _chosen_frames(video, survey, "a plate without the people") if frame_id in sampled]
     plate = people_free_plate(np.stack([image for image, _ in samples]), np.stack([found for _, found in samples]),
                               survey.plate, round(config.gap_mask_plate_margin * survey.track_height))
+    sightings: dict[tuple[int, int], tuple[np.ndarray, int] | None] = {}  # (label, frame id) -> (mask box, area)
+
+    def sighting(label: int, frame_id: int) -> tuple[np.ndarray, int] | None:
+        """The box and area of ``label``'s mask in a frame around a gap, read once for all the gap's frames."""
+        if (label, frame_id) not in sightings:
+            mask = _read_labels(work, frame_id) == label
+            sightings[label, frame_id] = (mask_box(mask), int(mask.sum())) if mask.any() else None
+        return sightings[label, frame_id]
+
     for frame_id, rgb in _chosen_frames(video, survey, "masks in the tracks' gaps"):
         if frame_id not in needed:
             continue
         image, labels = resized(rgb, track_size), _read_labels(work, frame_id)
         for person in people:
             for gap in (g for g in gaps[person.pid] if g.frame_id == frame_id):
-                around = [_read_labels(work, f) == person.label for f in (gap.before, gap.after)]
-                if not all(mask.any() for mask in around):
+                around = [sighting(person.label, f) for f in (gap.before, gap.after)]
+                if any(seen is None for seen in around):
                     continue
-                box = interpolated_box(*(mask_box(mask) for mask in around), gap.fraction, config.gap_mask_box_grow)
-                mine = gap_mask(image, plate, labels, box, float(np.mean([m.sum() for m in around])), config)
+                (box_before, area_before), (box_after, area_after) = around
+                box = interpolated_box(box_before, box_after, gap.fraction, config.gap_mask_box_grow)
+                mine = gap_mask(image, plate, labels, box, (area_before + area_after) / 2, config)
                 if mine is not None:
                     labels[mine] = person.label
                     additions.setdefault(frame_id, []).append((person.label, np.flatnonzero(mine)))
