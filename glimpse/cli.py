@@ -7,6 +7,10 @@
                                          a dataset's sequence -> a scene: zju-mocap, panoptic, emdb, hi4d, neuman
                                          (docs/datasets.md)
   glimpse validate SCENE                 check a scene against glimpse-scene/1
+  glimpse tracks SCENE [--merge INTO=FROM | --swap A,B | --drop P | --rename OLD=NEW] [--frames A:B]
+                                         list a scene's people, or correct them after looking at the ingest's
+                                         preview (merge two ids, undo an identity switch, drop a false find);
+                                         the preview is drawn again (docs/ingest.md)
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
                                          or rerun stage X (make X); a video is ingested first when it is newer
@@ -53,6 +57,8 @@ EXAMPLES = {
     "import": "glimpse import zju-mocap /data/zju_mocap runs/scenes/zju_377 --sequence 377 "
               "--body-model ~/smpl/SMPL_NEUTRAL.pkl --frames 0:570",
     "validate": "glimpse validate runs/scenes/demo_small",
+    "tracks": "glimpse tracks runs/scenes/clip --swap p0,p1 --frames 35:   # the ids switched at frame 35\n"
+              "  glimpse tracks runs/scenes/clip --merge p0=p2                # p2 is p0, back after a long absence",
     "run": 'glimpse run --scene runs/scenes/demo_small --params "06_joint_opt.schedule_scale=0.05"\n'
            "  glimpse run --video clip.mp4                 # ingest (when the video is newer), then every stage\n"
            "  glimpse run --scene S --stage 06_joint_opt   # rerun one stage (and what it needs)",
@@ -134,6 +140,16 @@ def main(argv: list[str] | None = None) -> int:
                                                                   "do not say")
     p_val = command("validate", "check a scene folder against glimpse-scene/1")
     p_val.add_argument("scene", type=Path)
+    p_tracks = command("tracks", "list a scene's people, or correct who is who (docs/ingest.md, \"Correcting the "
+                                 "tracks\")")
+    p_tracks.add_argument("scene", type=Path)
+    edits = p_tracks.add_mutually_exclusive_group()
+    edits.add_argument("--merge", metavar="INTO=FROM", help="FROM's frames become INTO's; FROM is removed")
+    edits.add_argument("--swap", metavar="A,B", help="exchange A's and B's data (in --frames)")
+    edits.add_argument("--drop", metavar="P", help="remove person P (or only their --frames)")
+    edits.add_argument("--rename", metavar="OLD=NEW", help="give person OLD the id NEW")
+    p_tracks.add_argument("--frames", default=None, metavar="A:B",
+                          help="frame ids A to B, B excluded (A: to the end), for --swap and --drop")
     p_run = command("run", "run the stages that are out of date (what make all and make <stage> call)")
     p_run.add_argument("--scene", default="", help="scene folder (glimpse-scene/1); with --video, where it goes")
     p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it")
@@ -271,6 +287,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         check_runnable(args.scene)
         print(f"{args.scene}: valid glimpse-scene/1, and the pipeline can run it")
         return 0
+    if args.command == "tracks":
+        return _tracks(args)
     if args.command == "run":
         return _run(args)
     if args.command == "batch":
@@ -324,6 +342,30 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(run.root)
     else:
         print(json.dumps(json.loads(run.params_file(args.stage).read_text())["params"], indent=2))
+    return 0
+
+
+def _tracks(args: argparse.Namespace) -> int:
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.corrections import correct, people_table
+    from glimpse.scene.people_edit import Edit, parse_frame_range
+
+    if not args.scene.is_dir():
+        raise GlimpseError(f"{args.scene}: no such scene folder")
+    frames = parse_frame_range(args.frames) if args.frames else None
+    forms = {"merge": ("=", "INTO=FROM"), "swap": (",", "A,B"), "drop": (None, "P"), "rename": ("=", "OLD=NEW")}
+    given = [(kind, getattr(args, kind)) for kind in forms if getattr(args, kind)]
+    if frames is not None and (not given or given[0][0] not in ("swap", "drop")):
+        raise GlimpseError("--frames goes with --swap or --drop")
+    if given:
+        kind, text = given[0]
+        separator, form = forms[kind]
+        people = (text,) if separator is None else tuple(part.strip() for part in text.split(separator))
+        if len(people) != (1 if separator is None else 2) or not all(people):
+            raise GlimpseError(f"--{kind} {text!r}: give {form}")
+        for line in correct(args.scene, Edit(kind, people, frames), load_ingest_config().keypoint_min_confidence):
+            print(line)
+    print(people_table(args.scene))
     return 0
 
 

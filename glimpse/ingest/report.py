@@ -12,6 +12,8 @@ import cv2
 import numpy as np
 
 REPORT_FORMAT = "glimpse-tracks/1"
+PREVIEW_FILE = "ingest/preview.mp4"  # in the scene folder (the scene format ignores ingest/)
+REPORT_FILE = "ingest/tracks.json"
 # COCO-17 limbs drawn in the preview.
 COCO17_LIMBS = ((5, 7), (7, 9), (6, 8), (8, 10), (5, 6), (5, 11), (6, 12), (11, 12), (11, 13), (13, 15),
                 (12, 14), (14, 16), (0, 5), (0, 6))

@@ -45,6 +45,8 @@ from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpo
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 from glimpse.ingest.report import (
+    PREVIEW_FILE,
+    REPORT_FILE,
     PersonTrack,
     preview_frames,
     report_table,
@@ -69,8 +71,6 @@ from glimpse.scene.writer import SceneWriter
 log = logging.getLogger("glimpse")
 
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
-PREVIEW_FILE = "ingest/preview.mp4"
-REPORT_FILE = "ingest/tracks.json"
 WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
 CHECKPOINT_FILE = "checkpoint.npz"
 
