@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from glimpse.ingest.config import load_ingest_config
-from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, mask_box, people_free_plate,
+from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, kept_only, mask_box, people_free_plate,
                                       with_mask_frames)
 from glimpse.ingest.report import PersonTrack
 
@@ -56,6 +56,18 @@ def test_the_mask_is_what_differs_from_the_plate_and_nobody_holds() -> None:
     # the box bounds it: the part of the hidden person outside the box is not taken
     narrow = gap_mask(image, plate, labels, np.array([70.0, 15.0, 105.0, 105.0]), float(visible.sum()), config)
     assert narrow is not None and not narrow[:, :69].any()
+
+
+def test_a_dropped_tracks_pixels_are_nobodys() -> None:
+    plate, image, labels, visible = _scene()
+    labels[visible] = 7  # a short track, dropped after tracking, that had found the hidden person
+    box, area = np.array([55.0, 15.0, 105.0, 105.0]), float(visible.sum())
+    config = load_ingest_config()
+    assert gap_mask(image, plate, labels, box, area, config) is None
+    kept = kept_only(labels, [1])
+    assert np.array_equal(kept > 0, labels == 1) and kept.dtype == labels.dtype
+    mine = gap_mask(image, plate, kept, box, area, config)
+    assert mine is not None and (mine & visible).sum() / (mine | visible).sum() > 0.95
 
 
 def test_no_mask_where_too_little_or_too_much_differs() -> None:

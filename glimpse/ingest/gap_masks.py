@@ -4,9 +4,9 @@ Where someone walks half hidden behind another person, the landmark model often 
 finds nobody, or finds the person in front), and looking again (glimpse.ingest.backfill) finds nothing that looks
 like them. Their visible pixels still differ from the background plate, and nobody found in that frame holds them:
 between the boxes of the person's masks before and after the gap (interpolated over time, grown by
-``gap_mask_box_grow``), the pixels that differ from the plate (glimpse.ingest.foreground) and are nobody's label are
-theirs, behind everyone found. A frame gets such a mask only where it holds ``gap_mask_min_share`` to
-``gap_mask_max_share`` of the person's mean mask area in the two frames that bracket the gap: less and they stay
+``gap_mask_box_grow``), the pixels that differ from the plate (glimpse.ingest.foreground) and are no kept
+person's label (:func:`kept_only`) are theirs, behind everyone found. A frame gets such a mask only where it holds
+``gap_mask_min_share`` to ``gap_mask_max_share`` of the person's mean mask area in the two frames that bracket the gap: less and they stay
 hidden (nothing is invented), more and something else (another person the tracks did not keep, a moved object)
 is there. Such frames carry no keypoints (all confidence 0; stage 02 interpolates the body there): the mask says
 where the person is seen, not how they stand.
@@ -82,6 +82,13 @@ def people_free_plate(samples: np.ndarray, people: np.ndarray, plate: np.ndarray
             median = np.nanmedian(values[:, seen], axis=0)
         out[rows][seen] = np.round(median).astype(np.uint8)
     return out
+
+
+def kept_only(labels: np.ndarray, kept: list[int]) -> np.ndarray:
+    """[H, W] uint16: ``labels`` with every label not in ``kept`` set to 0 (nobody). A track dropped after tracking
+    (too short, too small) is no one in the scene; often it was the person the kept track lost, found for a few
+    frames under a new id, so its pixels are left to the gap masks."""
+    return np.where(np.isin(labels, kept), labels, 0).astype(labels.dtype)
 
 
 def gap_mask(image: np.ndarray, plate: np.ndarray, labels: np.ndarray, box: np.ndarray, expected_area: float,

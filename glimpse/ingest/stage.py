@@ -56,7 +56,7 @@ from glimpse.ingest.sides import exchange_legs, exchange_sides, legs_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
-from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, mask_box, people_free_plate,
+from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, kept_only, mask_box, people_free_plate,
                                       with_mask_frames)
 from glimpse.ingest.occlusion import joints_on_others
 from glimpse.ingest.observation import Track
@@ -187,6 +187,7 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
     plate = people_free_plate(np.stack([image for image, _ in samples]), np.stack([found for _, found in samples]),
                               survey.plate, round(config.gap_mask_plate_margin * survey.track_height))
     sightings: dict[tuple[int, int], tuple[np.ndarray, int] | None] = {}  # (label, frame id) -> (mask box, area)
+    kept = [person.label for person in people]
 
     def sighting(label: int, frame_id: int) -> tuple[np.ndarray, int] | None:
         """The box and area of ``label``'s mask in a frame around a gap, read once for all the gap's frames."""
@@ -198,7 +199,7 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
     for frame_id, rgb in _chosen_frames(video, survey, "masks in the tracks' gaps"):
         if frame_id not in needed:
             continue
-        image, labels = resized(rgb, track_size), _read_labels(work, frame_id)
+        image, labels = resized(rgb, track_size), kept_only(_read_labels(work, frame_id), kept)
         for person in people:
             for gap in (g for g in gaps[person.pid] if g.frame_id == frame_id):
                 around = [sighting(person.label, f) for f in (gap.before, gap.after)]
