@@ -4,12 +4,12 @@ Where someone walks half hidden behind another person, the landmark model often 
 finds nobody, or finds the person in front), and looking again (glimpse.ingest.backfill) finds nothing that looks
 like them. Their visible pixels still differ from the background plate, and nobody found in that frame holds them:
 between the boxes of the person's masks before and after the gap (interpolated over time, grown by
-``gap_mask_box_grow``), the pixels that differ from the plate (glimpse.ingest.foreground) and are no kept
-person's label (:func:`kept_only`) are theirs, behind everyone found. A frame gets such a mask only where it holds
-``gap_mask_min_share`` to ``gap_mask_max_share`` of the person's mean mask area in the two frames that bracket the gap: less and they stay
-hidden (nothing is invented), more and something else (another person the tracks did not keep, a moved object)
-is there. Such frames carry no keypoints (all confidence 0; stage 02 interpolates the body there): the mask says
-where the person is seen, not how they stand.
+``gap_mask_box_grow``), the pixels that differ from the plate (glimpse.ingest.foreground) and are no kept person's
+label (:func:`kept_only`) are theirs, behind everyone found. A frame gets such a mask only where it holds
+``gap_mask_min_share`` to ``gap_mask_max_share`` of the person's mean mask area in the two frames that bracket the
+gap: less and they stay hidden (nothing is invented), more and something else (another person the tracks did not
+keep, a moved object) is there. Such frames carry no keypoints (all confidence 0; stage 02 interpolates the body
+there): the mask says where the person is seen, not how they stand.
 
 The plate they are compared with is not the survey's (a per-pixel median over all sampled frames), which shows
 a person who stood in one place for most of the video, so that wherever they moved away the background there

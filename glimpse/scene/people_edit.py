@@ -55,7 +55,11 @@ class Edit:
     frames: tuple[int, int | None] | None = None
 
     def describe(self) -> str:
-        span = "" if self.frames is None else f" in frames {self.frames[0]}:{'' if self.frames[1] is None else self.frames[1]}"
+        if self.frames is None:
+            span = ""
+        else:
+            first, end = self.frames
+            span = f" in frames {first}:{'' if end is None else end}"
         text = {"merge": "{1} merged into {0}", "swap": "{0} and {1} exchanged", "drop": "{0} dropped",
                 "rename": "{0} renamed {1}"}[self.kind].format(*self.people)
         return text + span
