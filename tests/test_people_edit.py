@@ -5,6 +5,7 @@ the scene left as it was when the result would not be valid; the ingest's previe
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -134,6 +135,7 @@ def test_the_command_records_the_edit_draws_the_preview_again_and_prints_the_peo
     assert cli_main(["tracks", str(scene), "--swap", "p0,p1", "--frames", "2:"]) == 0
     printed = capsys.readouterr().out
     assert "p0 and p1 exchanged in frames 2:" in printed and "preview drawn again" in printed
+    assert re.search(r"^p0 +4 +0 +3 +0 +4 +4 +1.00$", printed, re.MULTILINE)  # frames, first, last, gaps, kpts, masks
     assert json.loads((scene / "ingest/tracks.json").read_text())["edits"] == ["p0 and p1 exchanged in frames 2:"]
     preview = iio.imread(scene / "ingest/preview.mp4")
     assert len(preview) == FRAMES and preview[0].shape == (HEIGHT, WIDTH, 3)

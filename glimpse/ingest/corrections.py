@@ -20,9 +20,10 @@ from glimpse.io.images import read_mask, read_rgb
 from glimpse.io.json_file import write_json
 from glimpse.io.video import write_mp4
 from glimpse.scene import Scene, load_scene
-from glimpse.scene.people_edit import Edit, edit_people
+from glimpse.scene.model import KEYPOINT_LAYOUTS
+from glimpse.scene.people_edit import Edit, edit_people, read_person
 
-COCO17_JOINTS = 17
+COCO17_JOINTS = KEYPOINT_LAYOUTS["coco17"]
 
 
 def record_edit(scene_dir: Path, description: str) -> bool:
@@ -93,18 +94,19 @@ def _box(mask_file: Path | None, keypoints: np.ndarray) -> np.ndarray:
 
 
 def people_table(scene_dir: Path) -> str:
-    """The scene's people as a text table: frames with data, first and last, gaps, frames with keypoints and with
-    a mask, mean keypoint confidence."""
+    """The scene's people as a text table: frames with any data (keypoints, body, mask), first and last, gaps,
+    frames with 2D keypoints and with a mask, mean 2D keypoint confidence."""
     lines = [f"{'person':8} {'frames':>7} {'first':>6} {'last':>6} {'gaps':>5} {'kpts':>5} {'masks':>6} {'conf':>5}"]
-    scene = load_scene(scene_dir)
-    for person in scene_people(scene):
-        masks = len(scene.humans[person.pid].masks)
-        confidence = person.keypoints[..., 2]
-        with_keypoints = int((confidence > 0).any(1).sum())
+    for pid in sorted(load_scene(scene_dir).humans):
+        data = read_person(Path(scene_dir) / "humans" / pid)
+        frames = sorted(data.frames())
+        if not frames:
+            continue
+        confidence = data.files.get("keypoints2d.npz", {}).get("keypoints", np.zeros((0, 1, 3)))[..., 2]
         mean = float(confidence[confidence > 0].mean()) if (confidence > 0).any() else 0.0
-        first, last = person.frames[0], person.frames[-1]
-        lines.append(f"{person.pid:8} {len(person.frames):7d} {first:6d} {last:6d} "
-                     f"{last - first + 1 - len(person.frames):5d} {with_keypoints:5d} {masks:6d} {mean:5.2f}")
+        lines.append(f"{pid:8} {len(frames):7d} {frames[0]:6d} {frames[-1]:6d} "
+                     f"{frames[-1] - frames[0] + 1 - len(frames):5d} {int((confidence > 0).any(1).sum()):5d} "
+                     f"{len(data.masks):6d} {mean:5.2f}")
     return "\n".join(lines)
 
 
