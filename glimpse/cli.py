@@ -347,7 +347,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 def _tracks(args: argparse.Namespace) -> int:
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.corrections import correct, people_table
+    from glimpse.ingest.corrections import correct, people_table, suspected_switches
     from glimpse.scene.people_edit import Edit, parse_frame_range
 
     if not args.scene.is_dir():
@@ -366,6 +366,8 @@ def _tracks(args: argparse.Namespace) -> int:
         for line in correct(args.scene, Edit(kind, people, frames), load_ingest_config().keypoint_min_confidence):
             print(line)
     print(people_table(args.scene))
+    for line in suspected_switches(args.scene):
+        print(line)
     return 0
 
 

@@ -47,7 +47,9 @@ def _scene(root: Path, people: dict[str, tuple[list[int], float, int]], preview:
             writer.person_mask(pid, f, _mask(column))
     if preview:
         iio.imwrite(writer.side_file("ingest/preview.mp4"), np.zeros((FRAMES, HEIGHT, WIDTH, 3), np.uint8), fps=10)
-        writer.side_file("ingest/tracks.json").write_text(json.dumps({"format": "glimpse-tracks/1", "people": {}}))
+        suspicion = {"p0": {"suspected_switches": [{"frame": 2, "why": "the box jumped"}]}}
+        writer.side_file("ingest/tracks.json").write_text(json.dumps({"format": "glimpse-tracks/1",
+                                                                      "people": suspicion}))
     return writer.finish()
 
 
@@ -136,6 +138,8 @@ def test_the_command_records_the_edit_draws_the_preview_again_and_prints_the_peo
     printed = capsys.readouterr().out
     assert "p0 and p1 exchanged in frames 2:" in printed and "preview drawn again" in printed
     assert re.search(r"^p0 +4 +0 +3 +0 +4 +4 +1.00$", printed, re.MULTILINE)  # frames, first, last, gaps, kpts, masks
+    assert "(its ids; 1 correction(s) made since, which may have renamed them)" in printed
+    assert "  p0 frame 2: the box jumped" in printed
     assert json.loads((scene / "ingest/tracks.json").read_text())["edits"] == ["p0 and p1 exchanged in frames 2:"]
     preview = iio.imread(scene / "ingest/preview.mp4")
     assert len(preview) == FRAMES and preview[0].shape == (HEIGHT, WIDTH, 3)

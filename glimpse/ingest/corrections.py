@@ -110,6 +110,23 @@ def people_table(scene_dir: Path) -> str:
     return "\n".join(lines)
 
 
+def suspected_switches(scene_dir: Path) -> list[str]:
+    """The identity switches the ingest suspected (its tracks report), one line each, under the ids it gave; the
+    first line says how many corrections were made since (their ids may differ). Empty without a report or a
+    suspicion."""
+    path = Path(scene_dir) / REPORT_FILE
+    if not path.is_file():
+        return []
+    report = json.loads(path.read_text())
+    lines = [f"  {pid} frame {s['frame']}: {s['why']}" for pid, person in report.get("people", {}).items()
+             for s in person.get("suspected_switches", [])]
+    if not lines:
+        return []
+    edits = len(report.get("edits", []))
+    since = f"; {edits} correction(s) made since, which may have renamed them" if edits else ""
+    return [f"identity switches the ingest suspected (its ids{since}):", *lines]
+
+
 def correct(scene_dir: Path, edit: Edit, min_confidence: float) -> list[str]:
     """Apply ``edit`` to the scene's people (glimpse.scene.people_edit.edit_people), record it in the tracks
     report and draw the preview again (when the scene has them); returns what was done, one line each."""
