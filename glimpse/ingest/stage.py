@@ -418,4 +418,5 @@ def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config
     for note in notes:
         print(f"  note: {note}")
     print(report_table(report))
-    print(f"  check the tracks before a run: {scene_dir / PREVIEW_FILE} and {scene_dir / REPORT_FILE}")
+    print(f"  check the tracks before a run: {scene_dir / PREVIEW_FILE} and {scene_dir / REPORT_FILE}; correct "
+          f"them with glimpse tracks {scene_dir} (--swap, --merge, --drop, --rename)")
