@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from glimpse.ingest.gap_masks import mask_box
 from glimpse.ingest.report import PREVIEW_FILE, REPORT_FILE, PersonTrack, preview_frames
 from glimpse.io.images import read_mask, read_rgb
 from glimpse.io.json_file import write_json
@@ -86,9 +87,9 @@ def redraw_preview(scene_dir: Path, min_confidence: float) -> Path | None:
 def _box(mask_file: Path | None, keypoints: np.ndarray) -> np.ndarray:
     """(4,) x0, y0, x1, y1: the box of a mask, else of the keypoints with a confidence (zeros: neither)."""
     if mask_file is not None:
-        ys, xs = np.nonzero(read_mask(mask_file))
-        if len(xs):
-            return np.array([xs.min(), ys.min(), xs.max(), ys.max()], float)
+        mask = read_mask(mask_file)
+        if mask.any():
+            return mask_box(mask)
     seen = keypoints[keypoints[:, 2] > 0, :2]
     return np.concatenate([seen.min(0), seen.max(0)]) if len(seen) else np.zeros(4)
 
