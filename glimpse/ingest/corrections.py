@@ -19,6 +19,7 @@ from glimpse.ingest.gap_masks import mask_box
 from glimpse.ingest.report import PREVIEW_FILE, REPORT_FILE, PersonTrack, preview_frames
 from glimpse.io.images import read_mask, read_rgb
 from glimpse.io.json_file import write_json
+from glimpse.io.staging import staged_file
 from glimpse.io.video import write_mp4
 from glimpse.scene import Scene, load_scene
 from glimpse.scene.model import KEYPOINT_LAYOUTS
@@ -34,7 +35,8 @@ def record_edit(scene_dir: Path, description: str) -> bool:
         return False
     report = json.loads(path.read_text())
     report["edits"] = [*report.get("edits", []), description]
-    write_json(path, report)
+    with staged_file(path) as staged:
+        write_json(staged, report)
     return True
 
 
@@ -78,9 +80,7 @@ def redraw_preview(scene_dir: Path, min_confidence: float) -> Path | None:
                     labels[read_mask(mask_file)] = person.label
             yield frame_id, read_rgb(scene.frame_paths[frame_id]), labels
 
-    staged = path.with_name(path.stem + ".tmp" + path.suffix)
-    write_mp4(staged, preview_frames(frames(), people, min_confidence), scene.fps)
-    staged.replace(path)
+    write_mp4(path, preview_frames(frames(), people, min_confidence), scene.fps)  # written beside it, then renamed
     return path
 
 
