@@ -99,7 +99,8 @@ need-scene = $(if $(SCENE),,$(error SCENE=path/to/scene is required))
 need-scene-or-video = $(if $(SCENE)$(VIDEO),,$(error SCENE=path/to/scene (or VIDEO=clip.mp4) is required))
 need-video = $(if $(VIDEO),,$(error VIDEO=path/to/video is required))
 # A video given with VIDEO= becomes the scene folder SCENE (default: OUT/scenes/<video name>) before the stages,
-# ingested again only when the video is newer than the scene (`make ingest` always ingests).
+# ingested again only when the video is newer than the scene or the ingest parameters changed (`make ingest`
+# always ingests).
 run-stages = $(PY) -m glimpse run --scene "$$SCENE" --video "$$VIDEO" --out "$$OUT"
 
 ingest: venv models

@@ -14,6 +14,7 @@
   glimpse run --scene S|--video V --out O [--stage X] [--wait SECONDS]
                                          lock the run folder and run the stages that are out of date (make all),
                                          or rerun stage X (make X); a video is ingested first when it is newer
+                                         than its scene or the ingest parameters changed
   glimpse batch SCENE_OR_VIDEO... --executor local|ray|slurm [--out O] [--jobs N] [--retries R]
                                          many scenes through every stage, here, on Ray or on Slurm; failed ones
                                          retried and resumed; OUT/batch.md and batch.json (docs/batch.md)
@@ -53,14 +54,15 @@ EXIT_STATUSES = f"""exit statuses: 0 done; {EXIT_STAGE_FAILED} a stage failed (g
 
 # One example per command, shown by `glimpse COMMAND --help`.
 EXAMPLES = {
-    "ingest": "glimpse ingest clip.mp4 runs/scenes/clip   # then: glimpse run --scene runs/scenes/clip",
+    "ingest": "glimpse ingest clip.mp4 runs/scenes/clip   # then: glimpse run --scene runs/scenes/clip\n"
+              '  glimpse ingest clip.mp4 runs/scenes/clip --params "ingest.start_s=62 ingest.end_s=75"   # a part',
     "import": "glimpse import zju-mocap /data/zju_mocap runs/scenes/zju_377 --sequence 377 "
               "--body-model ~/smpl/SMPL_NEUTRAL.pkl --frames 0:570",
     "validate": "glimpse validate runs/scenes/demo_small",
     "tracks": "glimpse tracks runs/scenes/clip --swap p0,p1 --frames 35:   # the ids switched at frame 35\n"
               "  glimpse tracks runs/scenes/clip --merge p0=p2                # p2 is p0, back after a long absence",
     "run": 'glimpse run --scene runs/scenes/demo_small --params "06_joint_opt.schedule_scale=0.05"\n'
-           "  glimpse run --video clip.mp4                 # ingest (when the video is newer), then every stage\n"
+           "  glimpse run --video clip.mp4                 # ingest (unless up to date), then every stage\n"
            "  glimpse run --scene S --stage 06_joint_opt   # rerun one stage (and what it needs)",
     "batch": "glimpse batch runs/scenes/* --executor local --out runs\n"
              "  glimpse batch takes/*.mp4 --executor slurm --slurm-profile cluster.yaml --out /shared/runs\n"
@@ -152,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
                           help="frame ids A to B, B excluded (A: to the end), for --swap and --drop")
     p_run = command("run", "run the stages that are out of date (what make all and make <stage> call)")
     p_run.add_argument("--scene", default="", help="scene folder (glimpse-scene/1); with --video, where it goes")
-    p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it")
+    p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it or when the ingest parameters changed")
     p_run.add_argument("--out", type=Path, default=Path("runs"))
     p_run.add_argument("--stage", default=None, help="rerun this stage (and what it needs), not the whole pipeline")
     p_run.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
@@ -372,7 +374,8 @@ def _tracks(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    """``glimpse run``: ingest a newer video, then let make run the stages; make's status is returned."""
+    """``glimpse run``: ingest the video when the scene is not up to date with it, then let make run the stages;
+    make's status is returned."""
     from glimpse.pipeline.make import run_stages
 
     if not args.scene and not args.video:
@@ -380,15 +383,19 @@ def _run(args: argparse.Namespace) -> int:
     scene = Path(args.scene) if args.scene else None
     if args.video:
         from glimpse.ingest.config import load_ingest_config
-        from glimpse.ingest.stage import default_scene_dir, ingest
+        from glimpse.ingest.stage import default_scene_dir, ingest, why_ingest_again
 
         video = Path(args.video)
         if not video.is_file():
             raise GlimpseError(f"{video}: no such video file")
         scene = scene or default_scene_dir(video, args.out)
-        stamp = scene / "scene.yaml"
-        if not stamp.is_file() or video.stat().st_mtime_ns > stamp.stat().st_mtime_ns:
-            ingest(video, scene, load_ingest_config(args.params))
+        config = load_ingest_config(args.params)
+        reason = why_ingest_again(video, scene, config)
+        if reason is not None:
+            if (scene / "scene.yaml").is_file():
+                print(f"{scene}: {reason}; ingesting {video} again (corrections made with glimpse tracks are not "
+                      f"carried over; make all SCENE={scene} runs the scene as it is)")
+            ingest(video, scene, config)
     stages_dir = os.environ.get("GLIMPSE_STAGES_DIR") or None
     status = run_stages(scene, args.out, args.params, args.stage, sys.executable,
                         Path(stages_dir) if stages_dir else None, args.wait)

@@ -65,3 +65,34 @@ def test_the_installed_entry_point_is_the_module_main():
     result = subprocess.run([sys.executable, "-m", "glimpse", "--version"], capture_output=True, text=True,
                             cwd=REPO_ROOT, check=True)
     assert result.stdout.startswith("glimpse ")
+
+
+def test_run_with_a_video_ingests_it_again_only_when_the_scene_is_not_up_to_date(tmp_path, monkeypatch, capsys):
+    """`glimpse run --video` (make all VIDEO=...): a scene made from this video with these ingest parameters is
+    run as it is; other scene parameters (the tracks report records those it was made with) ingest it again, and
+    the output says which changed."""
+    import json
+    import os
+
+    import glimpse.ingest.stage as ingest_stage
+    import glimpse.pipeline.make as make
+    from glimpse.ingest.config import load_ingest_config
+
+    video, scene = tmp_path / "clip.mp4", tmp_path / "scene"
+    video.write_bytes(b"a video")
+    (scene / "ingest").mkdir(parents=True)
+    (scene / "scene.yaml").write_text("name: clip\n")
+    later = video.stat().st_mtime_ns + 10**9
+    os.utime(scene / "scene.yaml", ns=(later, later))
+    recorded = {"parameters": ingest_stage.scene_parameters(load_ingest_config())}
+    (scene / "ingest" / "tracks.json").write_text(json.dumps(recorded))
+    ingested, stages = [], []
+    monkeypatch.setattr(ingest_stage, "ingest", lambda video, scene, config: ingested.append(config.start_s))
+    monkeypatch.setattr(make, "run_stages", lambda scene, *rest: stages.append(scene) or 0)
+    command = ["run", "--video", str(video), "--scene", str(scene), "--out", str(tmp_path / "runs")]
+    assert cli.main(command + ["--params", "ingest.preview=false"]) == 0  # not a scene parameter
+    assert ingested == [] and stages == [scene]
+    assert cli.main(command + ["--params", "ingest.start_s=2.0"]) == 0
+    assert ingested == [2.0] and stages == [scene, scene]
+    assert (f"{scene}: ingest parameters changed since it was ingested: ingest.start_s 0.0 -> 2.0; ingesting "
+            f"{video} again") in capsys.readouterr().out

@@ -88,6 +88,26 @@ def test_truncated_video_is_refused_or_reported(tmp_path: Path) -> None:
         assert survey.truncated and survey.decoded < 30
 
 
+def test_a_part_of_the_video_keeps_the_whole_videos_frame_ids(tmp_path: Path) -> None:
+    """ingest.start_s / end_s: scene frame id k is the frame on screen at k / fps whatever the part; a frame limit
+    counts from the start; a part past the end, or ending before it starts, is refused naming the parameter."""
+    from dataclasses import replace
+
+    video = _pattern_video(tmp_path / "clip.mp4", frames=30)  # 3 s at 10 fps
+    survey = survey_video(video, replace(CONFIG, start_s=1.0, end_s=2.0))
+    assert survey.chosen == {k: k for k in range(10, 21)} and survey.decoded == 22  # stops one frame after 2.0 s
+    assert not survey.limited and not survey.truncated
+    survey = survey_video(video, replace(CONFIG, start_s=1.0, max_frames=5))
+    assert survey.chosen == {k: k for k in range(10, 15)} and survey.limited
+    survey = survey_video(video, replace(CONFIG, start_s=2.55, fps=5.0))  # the grid of 5 fps: ids 13 and 14
+    assert survey.chosen == {26: 13, 28: 14} and not survey.limited and not survey.truncated
+    for start, end, message in ((5.0, None, r"ingest\.start_s \(5\.0 s\) is past the video's end \(2\.90 s\)"),
+                                (1.0, 1.0, r"ingest\.end_s \(1\.0 s\) must come after ingest\.start_s"),
+                                (-1.0, None, r"ingest\.start_s must be 0 or more seconds")):
+        with pytest.raises(GlimpseError, match=r"clip\.mp4: " + message):
+            survey_video(video, replace(CONFIG, start_s=start, end_s=end))
+
+
 def test_missing_video(tmp_path: Path) -> None:
     with pytest.raises(GlimpseError, match="no such video file"):
         ingest(tmp_path / "nothing.mp4", tmp_path / "scene", CONFIG)
@@ -248,6 +268,43 @@ def test_an_interrupted_ingest_goes_on_from_its_checkpoint(demo_video, tmp_path:
     stop_at[0] = 0
     ingest(video, tmp_path / "again", replace(config, max_side=240))  # other parameters: the checkpoint is not used
     assert calls == list(range(12))
+
+
+@needs_models
+def test_an_ingested_part_holds_that_part_and_is_ingested_again_when_its_parameters_change(demo_video,
+                                                                                           tmp_path: Path) -> None:
+    """The scene of frames 10-17 holds exactly the video's frames 10-17 under their own ids; its tracks report
+    records the parameters, and a later run with other scene parameters (not with another preview setting), or a
+    newer video, says why it ingests again."""
+    import os
+    import shutil
+    from dataclasses import replace
+
+    from glimpse.ingest.stage import why_ingest_again
+    from glimpse.io.video import iter_video_frames, resized
+
+    fixture, source = demo_video
+    video = Path(shutil.copy(source, tmp_path / "clip.mp4"))
+    fps = load_scene(fixture).fps
+    config = replace(CONFIG, start_s=10 / fps, end_s=17 / fps, max_side=240, preview=False, track_min_frames=1)
+    report = ingest(video, tmp_path / "part", config)
+    scene = load_scene(tmp_path / "part")
+    assert scene.frame_ids == list(range(10, 18)) and report["segment_s"] == [10 / fps, 17 / fps]
+    decoded = dict(iter_video_frames(video, set(range(10, 18)), "reference"))
+    for frame_id in scene.frame_ids:
+        assert np.array_equal(read_rgb(scene.frame_paths[frame_id]), resized(decoded[frame_id], (240, 180)))
+    for person in scene.humans.values():
+        assert set(read_keypoints2d(person.keypoints2d).frame_ids) <= set(range(10, 18))
+    assert report["parameters"]["start_s"] == 10 / fps and "preview" not in report["parameters"]
+
+    assert why_ingest_again(video, tmp_path / "part", config) is None
+    assert why_ingest_again(video, tmp_path / "part", replace(config, preview=True, threads=2)) is None
+    assert why_ingest_again(video, tmp_path / "part", replace(config, end_s=None)) == (
+        f"ingest parameters changed since it was ingested: ingest.end_s {17 / fps!r} -> None")
+    assert why_ingest_again(video, tmp_path / "nothing", config) == "no scene yet"
+    later = (tmp_path / "part" / "scene.yaml").stat().st_mtime_ns + 10**9
+    os.utime(video, ns=(later, later))
+    assert why_ingest_again(video, tmp_path / "part", config) == "the video is newer than the scene"
 
 
 @needs_models

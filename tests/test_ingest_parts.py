@@ -164,6 +164,11 @@ def test_frame_grid_follows_timestamps() -> None:
     assert grid_choice(constant, 10.0, 3) == {0: 0, 1: 1, 2: 2}
     variable = [0.0, 0.1, 0.2, 0.5, 0.6]  # a pause: the frame at 0.2 s stays on screen until 0.5 s
     assert grid_choice(variable, 10.0, 100) == {0: 0, 1: 1, 2: 2, 3: 5, 4: 6}
+    # a part: the ids of the whole video's grid, the frame on screen at each grid time even if it began before
+    assert grid_choice(constant, 10.0, 100, start_s=0.3, end_s=0.6) == {3: 3, 4: 4, 5: 5, 6: 6}
+    assert grid_choice(constant, 5.0, 2, start_s=0.3) == {4: 2, 6: 3}
+    assert grid_choice(variable, 10.0, 100, start_s=0.3) == {2: 3, 3: 5, 4: 6}
+    assert grid_choice(constant, 10.0, 100, start_s=1.5) == {}
 
 
 # --- evaluation -----------------------------------------------------------------------------------------------

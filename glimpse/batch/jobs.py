@@ -57,7 +57,7 @@ class SceneJob:
         return self.out / "scenes" / self.label if self.is_video else self.source
 
     def command(self) -> list[str]:
-        """``glimpse run`` for this scene (a video: ingested first when it is newer than its scene)."""
+        """``glimpse run`` for this scene (a video: ingested first unless its scene is up to date)."""
         params = " ".join(p for p in (self.params, f"compute.threads={self.threads}" if self.threads else "") if p)
         command = [self.python, "-m", "glimpse", "run", "--scene", str(self.scene_dir), "--out", str(self.out),
                    "--wait", str(self.lock_wait_s)]

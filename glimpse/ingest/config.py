@@ -12,6 +12,8 @@ class IngestConfig:
     max_side: int
     track_max_side: int
     max_frames: int
+    start_s: float
+    end_s: float | None
     fps: float | None
     threads: int
     detector: Literal["blazepose", "onnx"]

@@ -25,11 +25,13 @@ the same video and parameters goes on from the last checkpoint; the folder is re
 
 from __future__ import annotations
 
+import json
 import logging
 import re
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import asdict
 from functools import partial
 from math import ceil
 from pathlib import Path
@@ -69,6 +71,8 @@ from glimpse.io.video import iter_video_frames, resized, write_mp4
 from glimpse.scene.writer import SceneWriter
 
 log = logging.getLogger("glimpse")
+
+SCENE_UNCHANGED_BY = ("preview", "checkpoint_frames", "threads")  # ingest parameters that leave the scene as it is
 
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
 WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
@@ -252,6 +256,7 @@ def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: flo
         "fps": survey.fps, "frames": len(survey.chosen), "decoded_frames": survey.decoded,
         "container_frames": survey.info.frame_count, "truncated": survey.truncated,
         "frame_limit": config.max_frames if survey.limited else None,
+        "segment_s": _segment_seconds(survey),
         "camera_motion": "static" if survey.static else "moving", "camera_motion_measure": survey.motion.motion,
         "focal_35mm_equivalent": survey.focal_35mm,
         "intrinsics": ("cameras.json from the container's focal length" if survey.focal_35mm is not None
@@ -259,6 +264,7 @@ def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: flo
                             "length in SfM (moving)"),
         "seconds": {"tracking": track_seconds},
         "resumed_after_frames": frames_done,
+        "parameters": scene_parameters(config),
         "tracking_fps": (len(survey.chosen) - frames_done) / max(track_seconds, 1e-9),
     }
 
@@ -273,6 +279,27 @@ def scene_name_of(video: Path) -> str:
 def default_scene_dir(video: Path, out_root: Path) -> Path:
     """Where ``make all VIDEO=...`` keeps a video's scene when no SCENE is given: OUT/scenes/<scene name>."""
     return Path(out_root) / "scenes" / scene_name_of(video)
+
+
+def scene_parameters(config: IngestConfig) -> dict:
+    """The ingest parameters a scene depends on (the tracks report's ``parameters``), as JSON values."""
+    return json.loads(json.dumps({k: v for k, v in asdict(config).items() if k not in SCENE_UNCHANGED_BY}))
+
+
+def why_ingest_again(video: Path, scene_dir: Path, config: IngestConfig) -> str | None:
+    """Why ``scene_dir`` is not what ingesting ``video`` with ``config`` would make (None: it is): no scene yet, a
+    video newer than the scene, or ingest parameters other than those its tracks report records (a parameter the
+    report does not name, from an older ingest, counts as unchanged)."""
+    stamp = Path(scene_dir) / "scene.yaml"
+    if not stamp.is_file():
+        return "no scene yet"
+    if Path(video).stat().st_mtime_ns > stamp.stat().st_mtime_ns:
+        return "the video is newer than the scene"
+    report = Path(scene_dir) / REPORT_FILE
+    recorded = json.loads(report.read_text()).get("parameters", {}) if report.is_file() else {}
+    changed = [f"ingest.{key} {recorded[key]!r} -> {value!r}" for key, value in scene_parameters(config).items()
+               if key in recorded and recorded[key] != value]
+    return f"ingest parameters changed since it was ingested: {', '.join(changed)}" if changed else None
 
 
 def fit_overrides(config: IngestConfig) -> dict[str, dict]:
@@ -403,11 +430,22 @@ def _track_frame(tracker: Tracker, frame_id: int, image: np.ndarray, recent: dic
     look_before_start(tracker, tracker.tracks[known:], frame_id, recent, labels_of, write_labels)
 
 
+def _segment_seconds(survey: Survey) -> list[float]:
+    """[first, last] scene frame's time in the video, seconds from its first frame."""
+    ids = survey.chosen.values()
+    return [min(ids) / survey.fps, max(ids) / survey.fps]
+
+
 def _announce(video: Path, scene_dir: Path, survey: Survey, report: dict, config: IngestConfig) -> None:
     notes = []
     if (survey.width, survey.height) != (survey.info.width, survey.info.height):
         notes.append(f"downscaled {survey.info.width}x{survey.info.height} -> {survey.width}x{survey.height} "
                      f"(ingest.max_side {config.max_side})")
+    if config.start_s > 0 or config.end_s is not None:
+        first, last = _segment_seconds(survey)
+        notes.append(f"kept {first:.2f}-{last:.2f} s of the video (ingest.start_s {config.start_s}, ingest.end_s "
+                     f"{config.end_s}); frame ids {min(survey.chosen.values())}-{max(survey.chosen.values())} "
+                     f"(id k at k / {survey.fps:g} s)")
     if survey.limited:
         notes.append(f"kept the first {config.max_frames} frames (ingest.max_frames)")
     if survey.truncated:

@@ -114,22 +114,37 @@ def resized(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(rgb, tuple(size), interpolation=cv2.INTER_AREA)
 
 
-def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterator[tuple[int, float, np.ndarray]]:
-    """Decode ``path`` frame by frame (streaming: one frame in memory at a time), display rotation applied.
-    Yields (decode index, presentation time in seconds, [H, W, 3] uint8 RGB, resized to ``size`` (width, height)
-    with the area filter when given)."""
+@dataclass
+class DecodedFrame:
+    """One frame of :func:`iter_video`: its decode index and presentation time (seconds), its pixels on request
+    (:meth:`rgb`, only while the iteration is at this frame: a frame nobody asks for is never converted)."""
+
+    index: int
+    seconds: float
+    _capture: cv2.VideoCapture
+    _size: tuple[int, int] | None
+    _path: Path
+
+    def rgb(self) -> np.ndarray:
+        """[H, W, 3] uint8 RGB, display rotation applied, resized to the iteration's size (area filter)."""
+        ok, bgr = self._capture.retrieve()
+        if not ok:
+            raise GlimpseError(f"{self._path}: frame {self.index} could not be read back from the decoder")
+        if self._size is not None:
+            bgr = resized(bgr, self._size)
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterator[DecodedFrame]:
+    """Decode ``path`` frame by frame (streaming: one frame in memory at a time). Yields each frame's
+    :class:`DecodedFrame`; its pixels (resized to ``size``, (width, height), when given) are made only when asked
+    for, before the iteration moves on."""
     path = Path(path)
     capture = _open_capture(path)
     try:
         index = 0
-        while True:
-            ok, bgr = capture.read()
-            if not ok:
-                return
-            seconds = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
-            if size is not None:
-                bgr = resized(bgr, size)
-            yield index, seconds, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        while capture.grab():
+            yield DecodedFrame(index, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0, capture, size, path)
             index += 1
     finally:
         capture.release()
@@ -137,13 +152,14 @@ def iter_video(path: str | Path, size: tuple[int, int] | None = None) -> Iterato
 
 def iter_video_frames(path: str | Path, wanted: Collection[int], desc: str) -> Iterator[tuple[int, np.ndarray]]:
     """(decode index, [H, W, 3] uint8 RGB) of the ``wanted`` decode indices of ``path``, in order, with a progress
-    bar; decoding stops after the last one. Raises GlimpseError when the video ends before it."""
+    bar; the frames between are decoded but not converted, and decoding stops after the last one. Raises
+    GlimpseError when the video ends before it."""
     last, decoded = max(wanted), 0
-    for index, _seconds, rgb in progress(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
-        decoded = index + 1
-        if index in wanted:
-            yield index, rgb
-        if index >= last:
+    for frame in progress(iter_video(path), desc=desc, unit="frame", leave=False, total=last + 1):
+        decoded = frame.index + 1
+        if frame.index in wanted:
+            yield frame.index, frame.rgb()
+        if frame.index >= last:
             return
     raise GlimpseError(f"{path}: the video ended at frame {decoded}, expected {last + 1} frames")
 
