@@ -154,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
                           help="frame ids A to B, B excluded (A: to the end), for --swap and --drop")
     p_run = command("run", "run the stages that are out of date (what make all and make <stage> call)")
     p_run.add_argument("--scene", default="", help="scene folder (glimpse-scene/1); with --video, where it goes")
-    p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it or when the ingest parameters changed")
+    p_run.add_argument("--video", default="", help="a video, ingested into the scene first when newer than it or "
+                                                   "when the ingest parameters changed")
     p_run.add_argument("--out", type=Path, default=Path("runs"))
     p_run.add_argument("--stage", default=None, help="rerun this stage (and what it needs), not the whole pipeline")
     p_run.add_argument("--params", default=_params_default(), help='overrides "section.key=value ..." (env GLIMPSE_PARAMS)')
