@@ -308,6 +308,28 @@ def test_an_ingested_part_holds_that_part_and_is_ingested_again_when_its_paramet
 
 
 @needs_models
+def test_the_scene_does_not_depend_on_the_models_threads(demo_video, tmp_path: Path) -> None:
+    """ingest.threads (auto: compute.threads) is left out of the scene's parameters and of the checkpoint's key,
+    because one thread and two write the same keypoints and masks."""
+    from dataclasses import replace
+
+    _, video = demo_video
+    scenes = []
+    for threads in (1, 2):
+        config = replace(CONFIG, max_frames=8, max_side=240, preview=False, track_min_frames=1, threads=threads)
+        ingest(video, tmp_path / f"threads{threads}", config)
+        scenes.append(tmp_path / f"threads{threads}")
+    one, two = (sorted((scene / "humans").rglob("*.*")) for scene in scenes)
+    assert [p.relative_to(scenes[0]) for p in one] == [p.relative_to(scenes[1]) for p in two] and one
+    for a, b in zip(one, two):
+        if a.suffix == ".npz":
+            x, y = np.load(a), np.load(b)
+            assert all(np.array_equal(x[k], y[k]) for k in x.files), a.name
+        else:
+            assert a.read_bytes() == b.read_bytes(), a.name
+
+
+@needs_models
 def test_user_onnx_models_plug_in(demo_video, tmp_path: Path) -> None:
     """detector: onnx finds people (BlazePose still follows and segments them); pose: onnx gives the keypoints."""
     from dataclasses import replace

@@ -157,6 +157,18 @@ def test_appearance_tells_colours_apart() -> None:
     assert appearance_distance(look, empty) == 1.0  # nothing to compare
 
 
+def test_the_models_threads_follow_compute_threads_unless_set() -> None:
+    from glimpse.compute import usable_cores
+    from glimpse.errors import GlimpseError
+    from glimpse.ingest.config import load_ingest_config
+
+    assert load_ingest_config("compute.threads=3").threads == 3
+    assert load_ingest_config("compute.threads=auto").threads == usable_cores()
+    assert load_ingest_config("compute.threads=3 ingest.threads=1").threads == 1
+    with pytest.raises(GlimpseError, match="ingest: threads must be auto or a number"):
+        load_ingest_config("ingest.threads=-1")
+
+
 def test_frame_grid_follows_timestamps() -> None:
     constant = [k / 10 for k in range(10)]
     assert grid_choice(constant, 10.0, 100) == {k: k for k in range(10)}

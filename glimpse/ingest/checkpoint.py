@@ -26,8 +26,8 @@ from glimpse.ingest.observation import Track
 log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
-# changing these keeps a checkpoint valid (the fit_* ones only go into scene.yaml)
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "fit_size_sigma", "fit_keypoint_noise_m",
+# changing these keeps a checkpoint valid (the fit_* ones only go into scene.yaml; threads change no result)
+NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "threads", "fit_size_sigma", "fit_keypoint_noise_m",
                            "fit_unseen_limbs_at_rest", "fit_up_from_torsos")
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
+
+from glimpse.errors import GlimpseError
 
 
 @dataclass(frozen=True)
@@ -15,7 +17,7 @@ class IngestConfig:
     start_s: float
     end_s: float | None
     fps: float | None
-    threads: int
+    threads: int | Literal["auto"]  # after load_ingest_config always a number (auto: compute.threads, resolved)
     detector: Literal["blazepose", "onnx"]
     detector_onnx_path: str | None
     detector_onnx_kind: Literal["rtmdet", "yolox"]
@@ -93,7 +95,16 @@ class IngestConfig:
 
 
 def load_ingest_config(cli_params: str = "") -> IngestConfig:
-    """pipeline.yaml's ``ingest`` section with "ingest.key=value ..." overrides (the PARAMS syntax)."""
+    """pipeline.yaml's ``ingest`` section with "ingest.key=value ..." overrides (the PARAMS syntax); ``threads:
+    auto`` resolved to compute.threads' number."""
+    from glimpse.compute import ComputeConfig, resolved_threads
     from glimpse.config import command_params, config_from_mapping
 
-    return config_from_mapping(IngestConfig, command_params(cli_params)["ingest"], "pipeline.yaml ingest")
+    params = command_params(cli_params)
+    config = config_from_mapping(IngestConfig, params["ingest"], "pipeline.yaml ingest")
+    if config.threads == "auto" or config.threads == 0:
+        compute = config_from_mapping(ComputeConfig, params["compute"], "pipeline.yaml compute")
+        config = replace(config, threads=resolved_threads(compute))
+    elif config.threads < 0:
+        raise GlimpseError(f"pipeline.yaml ingest: threads must be auto or a number of threads, found {config.threads}")
+    return config

@@ -39,7 +39,7 @@ WHOLEBODY = 133
 HEATMAP_SUBPIXEL = 0.25  # the classic quarter-pixel step towards the higher neighbour
 
 
-def _session(path: str | None, what: str):
+def _session(path: str | None, what: str, threads: int):
     import onnxruntime
 
     if not path:
@@ -49,7 +49,7 @@ def _session(path: str | None, what: str):
         raise GlimpseError(f"{path}: no such ONNX {what} model (ingest.{what}_onnx_path); Glimpse never downloads "
                            "models, export yours with rtmlib or mmdeploy")
     options = onnxruntime.SessionOptions()
-    options.intra_op_num_threads = 1
+    options.intra_op_num_threads = threads
     return onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
@@ -108,11 +108,12 @@ class OnnxDetector:
     path: str
     kind: str  # rtmdet | yolox
     min_score: float
+    threads: int = 1  # onnxruntime's intra-op threads
 
     def __post_init__(self) -> None:
         if self.kind not in ("rtmdet", "yolox"):
             raise GlimpseError(f"ingest.detector_onnx_kind must be rtmdet or yolox, found {self.kind!r}")
-        self.session = _session(self.path, "detector")
+        self.session = _session(self.path, "detector", self.threads)
         self.height, self.width = _input_hw(self.session, "detector")
 
     def __call__(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,9 +177,10 @@ class OnnxPose:
 
     path: str
     box_padding: float
+    threads: int = 1  # onnxruntime's intra-op threads
 
     def __post_init__(self) -> None:
-        self.session = _session(self.path, "pose")
+        self.session = _session(self.path, "pose", self.threads)
         self.height, self.width = _input_hw(self.session, "pose")
 
     def __call__(self, image: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

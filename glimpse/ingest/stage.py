@@ -86,9 +86,10 @@ def blazepose_folder(config: IngestConfig) -> Path:
 
 def user_models(config: IngestConfig) -> tuple[OnnxDetector | None, OnnxPose | None]:
     """The ONNX detector and pose model the parameters ask for (None: BlazePose's own)."""
-    detector = (OnnxDetector(config.detector_onnx_path, config.detector_onnx_kind, config.detector_onnx_min_score)
-                if config.detector == "onnx" else None)
-    pose = OnnxPose(config.pose_onnx_path, config.pose_onnx_box_padding) if config.pose == "onnx" else None
+    detector = (OnnxDetector(config.detector_onnx_path, config.detector_onnx_kind, config.detector_onnx_min_score,
+                             config.threads) if config.detector == "onnx" else None)
+    pose = (OnnxPose(config.pose_onnx_path, config.pose_onnx_box_padding, config.threads) if config.pose == "onnx"
+            else None)
     return detector, pose
 
 
