@@ -39,6 +39,7 @@ from glimpse.metrics.lpips import LPIPS
 from glimpse.prior import PriorContext, check_prior_kind, make_prior, resolve_prior_kind
 from glimpse.prior.config import SurfacePriorConfig
 from glimpse.render.config import RenderConfig
+from glimpse.render.projection import ALPHA_MIN
 from glimpse.scene import load_scene
 from tests.stage_helpers import read_json, run
 
@@ -440,7 +441,12 @@ def test_a_finished_run_exports_a_scene_ply_that_renders_like_the_run(tiny, tmp_
         expected = render_frame(camera, gaussians, len(finished.people), RENDER).rgb
         scene = GaussianModel.from_splats(read_gaussians_ply(tmp_path / "export" / doc["scenes"][0])[0])
         exported = rasterize(camera, **scene.render_inputs(RENDER.sh_degree), settings=RENDER).rgb
-    assert len(scene) == len(gaussians.means) and (exported - expected).abs().max() < 1e-4
+    # The PLY holds float32 logits and log-scales: a round trip can move a Gaussian across the rasterizer's alpha
+    # cutoff (ALPHA_MIN, 1/255) at a pixel, which changes that pixel by at most about the cutoff; a wrong convention
+    # (a scale, a colour, a rotation) would move most pixels.
+    difference = (exported - expected).abs()
+    assert len(scene) == len(gaussians.means) and difference.max() < ALPHA_MIN
+    assert (difference > 1e-4).float().mean() < 1e-3
     for pid in ("p0", "p1"):
         assert "posed_000003.ply" in doc["people"][pid]["files"] and "mesh_000003.glb" in doc["people"][pid]["files"]
         canonical, _ = read_gaussians_ply(tmp_path / "export" / "people" / pid / "canonical.ply")
