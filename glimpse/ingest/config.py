@@ -67,6 +67,8 @@ class IngestConfig:
     motion_sample_frames: int
     motion_min_tracked_fraction: float
     mask_threshold: float
+    mask_snap_radius: float
+    mask_snap_eps: float
     mask_body_radius: float
     mask_depth_cue: Literal["feet", "bones"]
     mask_depth_frames: int

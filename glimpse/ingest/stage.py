@@ -61,11 +61,13 @@ from glimpse.ingest.depth_order import depth_ordered_labels
 from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, kept_only, mask_box, people_free_plate,
                                       with_mask_frames)
 from glimpse.ingest.occlusion import joints_on_others
+from glimpse.ingest.mask_snap import snapped_masks
 from glimpse.ingest.observation import Track
 from glimpse.ingest.tracker import Tracker
 from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.ingest.upright import upside_down_share
-from glimpse.io.images import frame_name
+from glimpse.io.images import frame_name, read_mask, read_rgb
+from glimpse.io.progress import progress
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
 from glimpse.scene.writer import SceneWriter
@@ -239,11 +241,38 @@ def _person_mask(labels: np.ndarray, label: int, survey: Survey) -> np.ndarray:
     return resized(mine, (survey.width, survey.height)) > SCENE_MASK_COVERAGE
 
 
-def _scene_labels(labels: np.ndarray, people: list[PersonTrack], survey: Survey) -> np.ndarray:
-    """Tracking-size labels -> scene-size labels of the kept people."""
+def _write_masks(writer: SceneWriter, people: list[PersonTrack], labels_of: Callable[[int], np.ndarray],
+                 survey: Survey, config: IngestConfig) -> None:
+    """Each person's mask in each of their frames, at the scene's size: those from the segmentation snapped to the
+    frame's edges (glimpse.ingest.mask_snap; ``mask_snap_radius`` 0: as the labels give them), those from the plate
+    in a track's gap (already at the pixels' own edges, often slivers the filter would thin away) as they are."""
+    present: dict[int, list[PersonTrack]] = {}
+    for person in people:
+        for frame_id in person.frames:
+            present.setdefault(frame_id, []).append(person)
+    radius = round(config.mask_snap_radius * max(survey.width, survey.height))
+    for frame_id, here in progress(sorted(present.items()), desc="writing masks", unit="frame", leave=False):
+        labels = labels_of(frame_id)
+        masks = {person.pid: _person_mask(labels, person.label, survey) for person in here}
+        segmented = [person.pid for person in here if frame_id not in person.masks_from_foreground]
+        if radius > 0 and segmented:
+            frame = read_rgb(writer.written(f"frames/{frame_name(frame_id)}.png"))
+            from_plate = np.zeros(frame.shape[:2], bool)
+            for person in here:
+                if person.pid not in segmented:
+                    from_plate |= masks[person.pid]
+            snapped = snapped_masks(frame, [masks[pid] for pid in segmented], radius, config.mask_snap_eps)
+            masks.update({pid: mask & ~from_plate for pid, mask in zip(segmented, snapped)})
+        for person in here:
+            writer.person_mask(person.pid, frame_id, masks[person.pid])
+
+
+def _written_labels(writer: SceneWriter, people: list[PersonTrack], frame_id: int, survey: Survey) -> np.ndarray:
+    """[H, W] uint16 at the scene's size: the kept people's labels in one frame, from the masks written."""
     out = np.zeros((survey.height, survey.width), np.uint16)
     for person in people:
-        out[_person_mask(labels, person.label, survey)] = person.label
+        if frame_id in person.frames:
+            out[read_mask(writer.written(f"humans/{person.pid}/masks/{frame_name(frame_id)}.png"))] = person.label
     return out
 
 
@@ -404,11 +433,9 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))
     for person in people:
         writer.keypoints2d(person.pid, np.array(person.frames), "coco17", person.keypoints, person.relative3d)
-        for frame_id in person.frames:
-            writer.person_mask(person.pid, frame_id, _person_mask(labels_of(frame_id), person.label, survey))
+    _write_masks(writer, people, labels_of, survey, config)
     if config.preview:
-        frames = ((fid, resized(rgb, (survey.width, survey.height)),
-                   _scene_labels(labels_of(fid), people, survey))
+        frames = ((fid, resized(rgb, (survey.width, survey.height)), _written_labels(writer, people, fid, survey))
                   for fid, rgb in _chosen_frames(video, survey, "drawing the preview"))
         write_mp4(writer.side_file(PREVIEW_FILE), preview_frames(frames, people, config.keypoint_min_confidence),
                   survey.fps)

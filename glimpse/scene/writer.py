@@ -151,6 +151,14 @@ class SceneWriter:
         for pid, mask in (person_masks or {}).items():
             self._png(f"eval/{camera}/masks/{pid}/{frame_name(frame_id)}.png", _mask_png(mask))
 
+    def written(self, relative: str) -> Path:
+        """The staged path of a file this writer has written (``frames/000042.png``), to read it back before
+        :meth:`finish`."""
+        path = self.staging / relative
+        if not path.is_file():
+            raise FileNotFoundError(f"{relative} has not been written to {self.staging}")
+        return path
+
     def side_file(self, relative: str) -> Path:
         """A path inside the staged scene for a file the format does not name (a report, a preview): it moves
         into place with the scene, and readers ignore it. Its folder is created."""
