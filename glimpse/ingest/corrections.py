@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.ingest.gap_masks import mask_box
-from glimpse.ingest.report import PREVIEW_FILE, REPORT_FILE, PersonTrack, preview_frames
+from glimpse.ingest.report import PREVIEW_FILE, REPORT_FILE, PersonTrack, labels_from_masks, preview_frames
 from glimpse.io.images import read_mask, read_rgb
 from glimpse.io.json_file import write_json
 from glimpse.io.staging import staged_file
@@ -73,12 +73,8 @@ def redraw_preview(scene_dir: Path, min_confidence: float) -> Path | None:
 
     def frames():
         for frame_id in scene.frame_ids:
-            labels = np.zeros((scene.height, scene.width), np.uint16)
-            for person in people:
-                mask_file = masks[person.pid].get(frame_id)
-                if mask_file is not None:
-                    labels[read_mask(mask_file)] = person.label
-            yield frame_id, read_rgb(scene.frame_paths[frame_id]), labels
+            here = [(person.label, masks[person.pid][frame_id]) for person in people if frame_id in masks[person.pid]]
+            yield frame_id, read_rgb(scene.frame_paths[frame_id]), labels_from_masks(scene.height, scene.width, here)
 
     write_mp4(path, preview_frames(frames(), people, min_confidence), scene.fps)  # written beside it, then renamed
     return path

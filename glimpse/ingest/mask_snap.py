@@ -61,8 +61,10 @@ def snapped_masks(frame: np.ndarray, masks: list[np.ndarray], radius: int, eps: 
     the guide; see the module docstring); a pixel goes to the person whose filtered mask is highest there, if over
     one half. Computed within the box around all the masks grown by 2 radius + 1 pixels. A mask that would vanish
     is kept as it was."""
-    union = np.any(masks, axis=0) if masks else None
-    if union is None or not union.any() or radius < 1:
+    if radius < 1 or not masks:
+        return masks
+    union = np.any(masks, axis=0)
+    if not union.any():
         return masks
     rows, cols = np.flatnonzero(union.any(1)), np.flatnonzero(union.any(0))
     margin = 2 * radius + 1

@@ -7,9 +7,12 @@ from __future__ import annotations
 import colorsys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
+
+from glimpse.io.images import read_mask
 
 REPORT_FORMAT = "glimpse-tracks/1"
 PREVIEW_FILE = "ingest/preview.mp4"  # in the scene folder (the scene format ignores ingest/)
@@ -71,6 +74,14 @@ def draw_frame(image: np.ndarray, labels: np.ndarray, people: list[PersonTrack],
         cv2.putText(out, person.pid, (x0, max(y0 - 4, 12)), cv2.FONT_HERSHEY_SIMPLEX, max(scale, 0.4), colour,
                     thickness, cv2.LINE_AA)
     return out
+
+
+def labels_from_masks(height: int, width: int, masks: list[tuple[int, Path]]) -> np.ndarray:
+    """[height, width] uint16 label map of one frame from its people's (label, mask file) pairs; 0 = nobody."""
+    labels = np.zeros((height, width), np.uint16)
+    for label, mask_file in masks:
+        labels[read_mask(mask_file)] = label
+    return labels
 
 
 def preview_frames(frames: Iterator[tuple[int, np.ndarray, np.ndarray]], people: list[PersonTrack],

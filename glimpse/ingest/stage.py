@@ -50,6 +50,7 @@ from glimpse.ingest.report import (
     PREVIEW_FILE,
     REPORT_FILE,
     PersonTrack,
+    labels_from_masks,
     preview_frames,
     report_table,
     tracks_report,
@@ -66,7 +67,7 @@ from glimpse.ingest.observation import Track
 from glimpse.ingest.tracker import Tracker
 from glimpse.ingest.truncation import squeezed_at_border
 from glimpse.ingest.upright import upside_down_share
-from glimpse.io.images import frame_name, read_mask, read_rgb
+from glimpse.io.images import frame_name, read_rgb
 from glimpse.io.progress import progress
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
@@ -269,11 +270,9 @@ def _write_masks(writer: SceneWriter, people: list[PersonTrack], labels_of: Call
 
 def _written_labels(writer: SceneWriter, people: list[PersonTrack], frame_id: int, survey: Survey) -> np.ndarray:
     """[H, W] uint16 at the scene's size: the kept people's labels in one frame, from the masks written."""
-    out = np.zeros((survey.height, survey.width), np.uint16)
-    for person in people:
-        if frame_id in person.frames:
-            out[read_mask(writer.written(f"humans/{person.pid}/masks/{frame_name(frame_id)}.png"))] = person.label
-    return out
+    here = [(person.label, writer.written(f"humans/{person.pid}/masks/{frame_name(frame_id)}.png"))
+            for person in people if frame_id in person.frames]
+    return labels_from_masks(survey.height, survey.width, here)
 
 
 def _facts(video: Path, survey: Survey, config: IngestConfig, track_seconds: float, frames_done: int) -> dict:
