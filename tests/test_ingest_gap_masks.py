@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from glimpse.ingest.config import load_ingest_config
-from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, kept_only, mask_box, people_free_plate,
-                                      with_mask_frames)
+from glimpse.ingest.gap_masks import (GapFrame, Sighting, colour_histogram, colour_log_ratio, gap_frames, gap_mask,
+                                      interpolated_box, kept_only, mask_box, mean_colours, people_free_plate,
+                                      sightings_in, taken_back, with_mask_frames)
 from glimpse.ingest.report import PersonTrack
 
 SIZE = (120, 200)  # H, W
@@ -68,6 +69,65 @@ def test_a_dropped_tracks_pixels_are_nobodys() -> None:
     assert np.array_equal(kept > 0, labels == 1) and kept.dtype == labels.dtype
     mine = gap_mask(image, plate, kept, box, area, config)
     assert mine is not None and (mine & visible).sum() / (mine | visible).sum() > 0.95
+
+
+def test_colour_log_ratio_is_the_histograms_log_ratio_at_each_pixel() -> None:
+    rng = np.random.default_rng(0)
+    image = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    bins = 4
+    mine = colour_histogram(image, image[..., 0] > 128, bins)
+    theirs = colour_histogram(image, image[..., 0] <= 128, bins)
+    assert mine.shape == (bins ** 3,) and mine.sum() == pytest.approx(1.0) and (mine > 0).all()
+    # independently: each pixel's bin from its channels, then the ratio of the two histograms there
+    r, g, b = (image[..., c].astype(int) // (256 // bins) for c in range(3))
+    expected = np.log(mine[r * bins * bins + g * bins + b]) - np.log(theirs[r * bins * bins + g * bins + b])
+    np.testing.assert_allclose(colour_log_ratio(image, mine, theirs, 0.0), expected, rtol=1e-6)
+    assert (expected[image[..., 0] > 128] > 0).mean() > 0.9  # the red half's own colours are likelier under its own
+
+
+def _spread_scene() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[int, np.ndarray], np.ndarray]:
+    """As _scene, but the segmentation of the person in front spreads over the hidden person's visible pixels, as
+    BlazePose's does when it has lost the hidden one; with both people's colours as their masks around the gap
+    show them (clothes of two shades each)."""
+    plate, image, labels, visible = _scene()
+    image[::2][image[::2] == BEHIND] = BEHIND + 20
+    image[::2][image[::2] == FRONT] = FRONT - 20
+    labels[visible] = 1
+    hidden = colour_histogram(image, visible, 16)
+    front = colour_histogram(image, (labels == 1) & ~visible, 16)
+    return plate, image, labels, visible, {1: front}, hidden
+
+
+def test_pixels_the_person_in_front_holds_are_taken_back_where_their_colours_say_so() -> None:
+    plate, image, labels, visible, theirs, mine = _spread_scene()
+    config = load_ingest_config()
+    box = np.array([55.0, 15.0, 105.0, 105.0])
+    taken = taken_back(image, labels, box, mine, theirs, config.gap_mask_take_ratio, sigma_px=1.0)
+    assert (taken == visible).mean() > 0.99
+    assert gap_mask(image, plate, labels, box, float(visible.sum()), config) is None  # without: nobody's pixels
+    mask = gap_mask(image, plate, labels, box, float(visible.sum()), config, taken)
+    assert mask is not None and (mask & visible).sum() / (mask | visible).sum() > 0.95
+    # a holder whose colours are not known keeps its pixels; so does one dressed like the hidden person
+    assert not taken_back(image, labels, box, mine, {1: None}, 2.0, 1.0).any()
+    assert not taken_back(image, labels, box, mine, {1: mine}, 2.0, 1.0).any()
+    # the box bounds it
+    assert not taken_back(image, labels, np.array([80.0, 15.0, 105.0, 105.0]), mine, theirs, 2.0, 1.0)[:, :79].any()
+
+
+def test_sightings_and_mean_colours_around_a_gap() -> None:
+    _, image, labels, visible = _scene()
+    labels[visible] = 2
+    seen = sightings_in(image, labels, 5, bins=16)
+    assert set(seen) == {(1, 5), (2, 5)}
+    assert seen[2, 5].area == visible.sum()
+    np.testing.assert_array_equal(seen[2, 5].box, mask_box(visible))
+    np.testing.assert_allclose(seen[2, 5].colours, colour_histogram(image, visible, 16))
+    other = {(2, 9): Sighting(seen[2, 5].box, 1, colour_histogram(image, labels == 1, 16))}
+    gap = GapFrame(7, before=5, after=9, fraction=0.5)
+    np.testing.assert_allclose(mean_colours(gap, 2, {**seen, **other}),
+                               (seen[2, 5].colours + other[2, 9].colours) / 2)
+    np.testing.assert_allclose(mean_colours(gap, 1, seen), seen[1, 5].colours)
+    assert mean_colours(gap, 3, seen) is None
 
 
 def test_no_mask_where_too_little_or_too_much_differs() -> None:

@@ -204,9 +204,14 @@ def test_scores_count_recall_switches_and_pck() -> None:
             found[frame] = {"y": a_found}  # a's id changes at frame 3
     scores = score_people(truth, found, pck_fraction=0.1)
     assert scores["a"].recall == pytest.approx(5 / 6) and scores["a"].switches == 1
-    assert scores["a"].ids == ("x", "y") and scores["a"].pck == 1.0
-    assert scores["a"].mask_iou == pytest.approx(5 / 6)
-    assert scores["b"].recall == 0.0 and scores["b"].mask_iou == 0.0
+    assert scores["a"].ids == ("x", "y") and scores["a"].mask_iou == pytest.approx(5 / 6)
+    # the missed frame's joints count as not found, as its mask counts IoU 0
+    assert scores["a"].pck == pytest.approx(5 / 6) and scores["a"].pck_silhouette == pytest.approx(5 / 6)
+    assert scores["b"].recall == 0.0 and scores["b"].mask_iou == 0.0 and scores["b"].pck == 0.0
+    # found by a mask alone (no keypoints) in the frame it was missed: the same PCK, a higher recall
+    found[2] = {"x": FoundPerson(found[0]["x"].mask, np.zeros((17, 3)))}
+    again = score_people(truth, found, pck_fraction=0.1)["a"]
+    assert again.recall == 1.0 and again.pck == pytest.approx(5 / 6)
 
 
 def test_joints_behind_the_persons_own_body_are_not_counted_in_pck_but_reported() -> None:

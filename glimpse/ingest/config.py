@@ -62,6 +62,9 @@ class IngestConfig:
     gap_mask_min_share: float
     gap_mask_max_share: float
     gap_mask_plate_margin: float
+    gap_mask_take_ratio: float
+    gap_mask_colour_bins: int
+    gap_mask_colour_smoothing: float
     plate_frames: int
     motion_threshold: float
     motion_sample_frames: int

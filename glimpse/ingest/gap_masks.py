@@ -11,6 +11,14 @@ gap: less and they stay hidden (nothing is invented), more and something else (a
 keep, a moved object) is there. Such frames carry no keypoints (all confidence 0; stage 02 interpolates the body
 there): the mask says where the person is seen, not how they stand.
 
+The person in front often holds some of those pixels: where the landmark model loses someone walking behind
+another, the segmentation of the person in front tends to spread over both. Inside the box, a pixel another
+person holds is taken back (:func:`taken_back`) where its colour is more than ``gap_mask_take_ratio`` times as
+likely under the colours of the person in the gap (their masks in the two frames around it) as under the colours
+of the person holding it (that person's masks in the same two frames), the log of that ratio smoothed over
+``gap_mask_colour_smoothing`` of the frame's height first (single pixels do not decide). Clothes of the same colours
+leave the pixels where they are.
+
 The plate they are compared with is not the survey's (a per-pixel median over all sampled frames), which shows
 a person who stood in one place for most of the video, so that wherever they moved away the background there
 "differs" from it: it is the median over the sampled frames of only the pixels no found person covers
@@ -20,6 +28,7 @@ a person who stood in one place for most of the video, so that wherever they mov
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from math import ceil
 
 import cv2
 import numpy as np
@@ -91,12 +100,80 @@ def kept_only(labels: np.ndarray, kept: list[int]) -> np.ndarray:
     return np.where(np.isin(labels, kept), labels, 0).astype(labels.dtype)
 
 
+def colour_histogram(image: np.ndarray, mask: np.ndarray, bins: int) -> np.ndarray:
+    """[bins ** 3] float: the RGB colours of ``image`` [H, W, 3] uint8 under ``mask`` [H, W] bool, ``bins`` per
+    channel, one count added to every bin (a colour not seen stays possible), normalised to unit sum."""
+    counts = np.bincount(_colour_bins(image[mask], bins), minlength=bins ** 3).astype(float) + 1.0
+    return counts / counts.sum()
+
+
+def _colour_bins(pixels: np.ndarray, bins: int) -> np.ndarray:
+    """[...] int: the RGB histogram bin of each of ``pixels`` [..., 3] uint8."""
+    index = pixels.astype(np.int64) * bins // 256
+    return (index[..., 0] * bins + index[..., 1]) * bins + index[..., 2]
+
+
+def colour_log_ratio(image: np.ndarray, mine: np.ndarray, theirs: np.ndarray, sigma_px: float) -> np.ndarray:
+    """[H, W] float32: log p(colour | ``mine``) - log p(colour | ``theirs``) at each pixel of ``image`` [H, W, 3]
+    uint8, both [bins ** 3] colour histograms (:func:`colour_histogram`), smoothed by a Gaussian of ``sigma_px``."""
+    bins = round(len(mine) ** (1 / 3))
+    index = _colour_bins(image, bins)
+    ratio = (np.log(mine)[index] - np.log(theirs)[index]).astype(np.float32)
+    return cv2.GaussianBlur(ratio, (0, 0), sigma_px) if sigma_px > 0 else ratio
+
+
+def taken_back(image: np.ndarray, labels: np.ndarray, box: np.ndarray, mine: np.ndarray,
+               theirs: dict[int, np.ndarray | None], ratio: float, sigma_px: float) -> np.ndarray:
+    """[H, W] bool: the pixels inside ``box`` held by a label of ``theirs`` (label -> its colour histogram) whose
+    colour is more than ``ratio`` times as likely under ``mine`` as under that label's (:func:`colour_log_ratio`).
+    Labels whose histogram is None keep their pixels."""
+    inside = box_pixels(box, labels.shape)
+    taken = np.zeros(labels.shape, bool)
+    if not inside.any():
+        return taken
+    margin = ceil(3 * sigma_px)  # the smoothing's reach
+    rows, cols = (slice(max(0, int(idx.min()) - margin), int(idx.max()) + 1 + margin) for idx in np.nonzero(inside))
+    for label, histogram in theirs.items():
+        held = inside[rows, cols] & (labels[rows, cols] == label)
+        if histogram is not None and held.any():
+            log_ratio = colour_log_ratio(image[rows, cols], mine, histogram, sigma_px)
+            taken[rows, cols] |= held & (log_ratio > np.log(ratio))
+    return taken
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """A person's mask in a frame just before or after a gap in their track (tracking size)."""
+
+    box: np.ndarray  # (4,) x0, y0, x1, y1 pixels
+    area: int  # pixels
+    colours: np.ndarray  # [bins ** 3] colour histogram (:func:`colour_histogram`)
+
+
+def sightings_in(image: np.ndarray, labels: np.ndarray, frame_id: int, bins: int) -> dict[tuple[int, int], Sighting]:
+    """(label, ``frame_id``) -> the mask of every label in ``labels`` [H, W] (0: nobody) over ``image``."""
+    out = {}
+    for label in np.unique(labels[labels > 0]):
+        mask = labels == label
+        out[int(label), frame_id] = Sighting(mask_box(mask), int(mask.sum()), colour_histogram(image, mask, bins))
+    return out
+
+
+def mean_colours(gap: GapFrame, label: int, sightings: dict[tuple[int, int], Sighting]) -> np.ndarray | None:
+    """The mean colour histogram of ``label``'s masks in the frames around ``gap``; None when neither shows them."""
+    seen = [sightings[label, f].colours for f in (gap.before, gap.after) if (label, f) in sightings]
+    return np.mean(seen, axis=0) if seen else None
+
+
 def gap_mask(image: np.ndarray, plate: np.ndarray, labels: np.ndarray, box: np.ndarray, expected_area: float,
-             config: IngestConfig) -> np.ndarray | None:
+             config: IngestConfig, taken: np.ndarray | None = None) -> np.ndarray | None:
     """[H, W] bool: the pixels of ``image`` [H, W, 3] uint8 inside ``box`` that differ from ``plate`` and that no
-    label of ``labels`` [H, W] (0: nobody) holds, cleaned as the foreground is; None when they cover less than
-    ``gap_mask_min_share`` or more than ``gap_mask_max_share`` of ``expected_area`` (pixels)."""
+    label of ``labels`` [H, W] (0: nobody) holds, or that are ``taken`` [H, W] bool (:func:`taken_back`) from
+    the label holding them, cleaned as the foreground is; None when they cover less than ``gap_mask_min_share``
+    or more than ``gap_mask_max_share`` of ``expected_area`` (pixels)."""
     found = labels > 0
+    if taken is not None:
+        found &= ~taken
     mine = unexplained_foreground(image, plate, found, config).astype(bool) & ~found & box_pixels(box, labels.shape)
     share = mine.sum() / max(expected_area, 1.0)
     return mine if config.gap_mask_min_share <= share <= config.gap_mask_max_share else None

@@ -59,8 +59,8 @@ from glimpse.ingest.sides import exchange_legs, exchange_sides, legs_to_exchange
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
-from glimpse.ingest.gap_masks import (gap_frames, gap_mask, interpolated_box, kept_only, mask_box, people_free_plate,
-                                      with_mask_frames)
+from glimpse.ingest.gap_masks import (Sighting, gap_frames, gap_mask, interpolated_box, kept_only, mask_box,
+                                      mean_colours, people_free_plate, sightings_in, taken_back, with_mask_frames)
 from glimpse.ingest.occlusion import joints_on_others
 from glimpse.ingest.mask_snap import snapped_masks
 from glimpse.ingest.observation import Track
@@ -181,28 +181,30 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
     (glimpse.ingest.gap_masks; their keypoints there all at confidence 0), the frames decoded again; and those
     masks, frame id -> [(label, flat indices of its pixels in the tracking-size labels)]. The labels in ``work``
     stay as tracking wrote them (an interrupted ingest run again sees the same). Two more passes over the frames:
-    one for the plate without the people (glimpse.ingest.gap_masks.people_free_plate), one for the masks."""
+    one for the plate without the people (glimpse.ingest.gap_masks.people_free_plate) and everyone's masks in the
+    frames around the gaps (their boxes, areas and colours), one for the masks."""
     gaps = {person.pid: gap_frames(person.frames, config.gap_mask_max_frames) for person in people}
     needed = {gap.frame_id for person_gaps in gaps.values() for gap in person_gaps}
+    around = {f for person_gaps in gaps.values() for gap in person_gaps for f in (gap.before, gap.after)}
     added: dict[str, dict[int, np.ndarray]] = {person.pid: {} for person in people}  # frame id -> scene box
     additions: dict[int, list[tuple[int, np.ndarray]]] = {}
     if not needed:
         return people, additions
     track_size = (survey.track_width, survey.track_height)
     sampled = set(list(survey.chosen.values())[::max(1, ceil(len(survey.chosen) / config.plate_frames))])
-    samples = [(resized(rgb, track_size), _read_labels(work, frame_id) > 0)
-               for frame_id, rgb in _chosen_frames(video, survey, "a plate without the people") if frame_id in sampled]
+    kept = [person.label for person in people]
+    samples = []
+    sightings: dict[tuple[int, int], Sighting] = {}  # (label, frame id around a gap) -> that person's mask there
+    for frame_id, rgb in _chosen_frames(video, survey, "a plate without the people"):
+        if frame_id in sampled or frame_id in around:
+            image, labels = resized(rgb, track_size), _read_labels(work, frame_id)
+        if frame_id in sampled:
+            samples.append((image, labels > 0))  # anyone found, a track dropped later included
+        if frame_id in around:
+            sightings.update(sightings_in(image, kept_only(labels, kept), frame_id, config.gap_mask_colour_bins))
     plate = people_free_plate(np.stack([image for image, _ in samples]), np.stack([found for _, found in samples]),
                               survey.plate, round(config.gap_mask_plate_margin * survey.track_height))
-    sightings: dict[tuple[int, int], tuple[np.ndarray, int] | None] = {}  # (label, frame id) -> (mask box, area)
-    kept = [person.label for person in people]
-
-    def sighting(label: int, frame_id: int) -> tuple[np.ndarray, int] | None:
-        """The box and area of ``label``'s mask in a frame around a gap, read once for all the gap's frames."""
-        if (label, frame_id) not in sightings:
-            mask = _read_labels(work, frame_id) == label
-            sightings[label, frame_id] = (mask_box(mask), int(mask.sum())) if mask.any() else None
-        return sightings[label, frame_id]
+    smoothing_px = config.gap_mask_colour_smoothing * survey.track_height
 
     for frame_id, rgb in _chosen_frames(video, survey, "masks in the tracks' gaps"):
         if frame_id not in needed:
@@ -210,12 +212,16 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
         image, labels = resized(rgb, track_size), kept_only(_read_labels(work, frame_id), kept)
         for person in people:
             for gap in (g for g in gaps[person.pid] if g.frame_id == frame_id):
-                around = [sighting(person.label, f) for f in (gap.before, gap.after)]
-                if any(seen is None for seen in around):
+                before, after = (sightings.get((person.label, f)) for f in (gap.before, gap.after))
+                if before is None or after is None:
                     continue
-                (box_before, area_before), (box_after, area_after) = around
-                box = interpolated_box(box_before, box_after, gap.fraction, config.gap_mask_box_grow)
-                mine = gap_mask(image, plate, labels, box, (area_before + area_after) / 2, config)
+                box = interpolated_box(before.box, after.box, gap.fraction, config.gap_mask_box_grow)
+                taken = None
+                if config.gap_mask_take_ratio > 0:
+                    theirs = {label: mean_colours(gap, label, sightings) for label in kept if label != person.label}
+                    taken = taken_back(image, labels, box, mean_colours(gap, person.label, sightings), theirs,
+                                       config.gap_mask_take_ratio, smoothing_px)
+                mine = gap_mask(image, plate, labels, box, (before.area + after.area) / 2, config, taken)
                 if mine is not None:
                     labels[mine] = person.label
                     additions.setdefault(frame_id, []).append((person.label, np.flatnonzero(mine)))
