@@ -10,9 +10,9 @@ COCO-17 joints inside the image and on the person's own visible pixels):
 - PCK: the fraction of the joints in view found (confidence > 0) within ``pck_fraction`` of the torso size
   (left shoulder to right hip) of the true joint. A joint is in view when it is visible (as above) and not
   behind the person's own body either (``in_front_of_own_body``: the far arm of someone seen side-on lies on
-  their visible pixels, but the camera does not see it, and the ingest is asked not to invent it). As for the
-  mask IoU, a frame where nobody was matched to the person counts, its joints in view as not found (so finding
-  a person by their mask alone, without keypoints, costs no PCK against not finding them). PCK over every visible
+  their visible pixels, but the camera does not see it, and the ingest is asked not to invent it). As the mask
+  IoU does, it counts a frame where nobody was matched to the person, with all its joints in view not found (so
+  finding a person by their mask alone, without keypoints, costs no PCK against not finding them). PCK over every visible
   joint, the far arm included, is given too (``pck_silhouette``);
 - hidden reported: the fraction of joints behind the person's own body that were given a confidence > 0;
 - outside reported: the fraction of the joints outside the image that were given a confidence > 0;

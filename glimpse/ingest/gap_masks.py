@@ -151,7 +151,8 @@ class Sighting:
 
 
 def sightings_in(image: np.ndarray, labels: np.ndarray, frame_id: int, bins: int) -> dict[tuple[int, int], Sighting]:
-    """(label, ``frame_id``) -> the mask of every label in ``labels`` [H, W] (0: nobody) over ``image``."""
+    """(label, ``frame_id``) -> the box, area and colours (``bins`` per channel) of each label's mask in ``labels``
+    [H, W] (0: nobody) over ``image`` [H, W, 3] uint8."""
     out = {}
     for label in np.unique(labels[labels > 0]):
         mask = labels == label
