@@ -19,16 +19,17 @@ from pathlib import Path
 import numpy as np
 
 from glimpse.ingest.blazepose import PoseLandmarks
-from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.config import SCENE_UNCHANGED_BY, IngestConfig
 from glimpse.ingest.crop import Region
 from glimpse.ingest.observation import Track
 
 log = logging.getLogger("glimpse")
 
 LANDMARK_ARRAYS = ("points", "visibility", "presence", "world", "segmentation")
-# changing these keeps a checkpoint valid (the fit_* ones only go into scene.yaml; threads change no result)
-NOT_TRACKING_PARAMETERS = ("preview", "checkpoint_frames", "threads", "fit_size_sigma", "fit_keypoint_noise_m",
-                           "fit_unseen_limbs_at_rest", "fit_up_from_torsos")
+# changing these keeps a checkpoint valid: those that leave the scene as it is, and the fit_* ones (they only go into
+# scene.yaml)
+NOT_TRACKING_PARAMETERS = SCENE_UNCHANGED_BY + ("fit_size_sigma", "fit_keypoint_noise_m", "fit_unseen_limbs_at_rest",
+                                                "fit_up_from_torsos")
 
 
 def fingerprint(video: Path, config: IngestConfig) -> str:

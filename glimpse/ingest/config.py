@@ -8,6 +8,9 @@ from typing import Literal
 from glimpse.errors import GlimpseError
 
 
+# ingest parameters that leave the scene it writes as it is (glimpse.ingest.stage.scene_parameters)
+SCENE_UNCHANGED_BY = ("preview", "checkpoint_frames", "threads")
+
 @dataclass(frozen=True)
 class IngestConfig:
     blazepose_dir: str

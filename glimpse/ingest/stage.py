@@ -44,7 +44,7 @@ from glimpse.errors import GlimpseError
 from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
 from glimpse.ingest.blazepose import BlazePose
 from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpoint
-from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.config import SCENE_UNCHANGED_BY, IngestConfig
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 from glimpse.ingest.report import (
     PREVIEW_FILE,
@@ -74,8 +74,6 @@ from glimpse.io.video import iter_video_frames, resized, write_mp4
 from glimpse.scene.writer import SceneWriter
 
 log = logging.getLogger("glimpse")
-
-SCENE_UNCHANGED_BY = ("preview", "checkpoint_frames", "threads")  # ingest parameters that leave the scene as it is
 
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
 WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
