@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from glimpse.ingest.config import load_ingest_config
-from glimpse.ingest.gap_masks import (GapFrame, Sighting, colour_histogram, colour_log_ratio, gap_frames, gap_mask,
-                                      interpolated_box, kept_only, mask_box, mean_colours, people_free_plate,
+from glimpse.ingest.gap_masks import (GapFrame, Sighting, colour_bins, colour_histogram, colour_log_ratio, gap_frames,
+                                      gap_mask, interpolated_box, kept_only, mask_box, mean_colours, people_free_plate,
                                       sightings_in, taken_back, with_mask_frames)
 from glimpse.ingest.report import PersonTrack
 
@@ -81,7 +81,7 @@ def test_colour_log_ratio_is_the_histograms_log_ratio_at_each_pixel() -> None:
     # independently: each pixel's bin from its channels, then the ratio of the two histograms there
     r, g, b = (image[..., c].astype(int) // (256 // bins) for c in range(3))
     expected = np.log(mine[r * bins * bins + g * bins + b]) - np.log(theirs[r * bins * bins + g * bins + b])
-    np.testing.assert_allclose(colour_log_ratio(image, mine, theirs, 0.0), expected, rtol=1e-6)
+    np.testing.assert_allclose(colour_log_ratio(colour_bins(image, bins), mine, theirs, 0.0), expected, rtol=1e-6)
     assert (expected[image[..., 0] > 128] > 0).mean() > 0.9  # the red half's own colours are likelier under its own
 
 

@@ -28,7 +28,7 @@ a person who stood in one place for most of the video, so that wherever they mov
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from math import ceil
+from math import ceil, floor
 
 import cv2
 import numpy as np
@@ -103,22 +103,21 @@ def kept_only(labels: np.ndarray, kept: list[int]) -> np.ndarray:
 def colour_histogram(image: np.ndarray, mask: np.ndarray, bins: int) -> np.ndarray:
     """[bins ** 3] float: the RGB colours of ``image`` [H, W, 3] uint8 under ``mask`` [H, W] bool, ``bins`` per
     channel, one count added to every bin (a colour not seen stays possible), normalised to unit sum."""
-    counts = np.bincount(_colour_bins(image[mask], bins), minlength=bins ** 3).astype(float) + 1.0
+    counts = np.bincount(colour_bins(image[mask], bins), minlength=bins ** 3).astype(float) + 1.0
     return counts / counts.sum()
 
 
-def _colour_bins(pixels: np.ndarray, bins: int) -> np.ndarray:
-    """[...] int: the RGB histogram bin of each of ``pixels`` [..., 3] uint8."""
+def colour_bins(pixels: np.ndarray, bins: int) -> np.ndarray:
+    """[...] int: the RGB histogram bin of each of ``pixels`` [..., 3] uint8, ``bins`` per channel."""
     index = pixels.astype(np.int64) * bins // 256
     return (index[..., 0] * bins + index[..., 1]) * bins + index[..., 2]
 
 
-def colour_log_ratio(image: np.ndarray, mine: np.ndarray, theirs: np.ndarray, sigma_px: float) -> np.ndarray:
-    """[H, W] float32: log p(colour | ``mine``) - log p(colour | ``theirs``) at each pixel of ``image`` [H, W, 3]
-    uint8, both [bins ** 3] colour histograms (:func:`colour_histogram`), smoothed by a Gaussian of ``sigma_px``."""
-    bins = round(len(mine) ** (1 / 3))
-    index = _colour_bins(image, bins)
-    ratio = (np.log(mine)[index] - np.log(theirs)[index]).astype(np.float32)
+def colour_log_ratio(colour_index: np.ndarray, mine: np.ndarray, theirs: np.ndarray, sigma_px: float) -> np.ndarray:
+    """[H, W] float32: log p(colour | ``mine``) - log p(colour | ``theirs``) at each pixel of an image whose colours'
+    bins are ``colour_index`` [H, W] (:func:`colour_bins`), both [bins ** 3] colour histograms
+    (:func:`colour_histogram`), smoothed by a Gaussian of ``sigma_px``."""
+    ratio = (np.log(mine)[colour_index] - np.log(theirs)[colour_index]).astype(np.float32)
     return cv2.GaussianBlur(ratio, (0, 0), sigma_px) if sigma_px > 0 else ratio
 
 
@@ -126,17 +125,22 @@ def taken_back(image: np.ndarray, labels: np.ndarray, box: np.ndarray, mine: np.
                theirs: dict[int, np.ndarray | None], ratio: float, sigma_px: float) -> np.ndarray:
     """[H, W] bool: the pixels inside ``box`` held by a label of ``theirs`` (label -> its colour histogram) whose
     colour is more than ``ratio`` times as likely under ``mine`` as under that label's (:func:`colour_log_ratio`).
-    Labels whose histogram is None keep their pixels."""
-    inside = box_pixels(box, labels.shape)
+    Labels whose histogram is None keep their pixels. Computed on the box grown by the smoothing's reach."""
+    height, width = labels.shape
     taken = np.zeros(labels.shape, bool)
-    if not inside.any():
+    y0, y1 = max(0, ceil(box[1])), min(height - 1, floor(box[3]))  # the rows and columns of the box's pixels
+    x0, x1 = max(0, ceil(box[0])), min(width - 1, floor(box[2]))
+    if y0 > y1 or x0 > x1:
         return taken
     margin = ceil(3 * sigma_px)  # the smoothing's reach
-    rows, cols = (slice(max(0, int(idx.min()) - margin), int(idx.max()) + 1 + margin) for idx in np.nonzero(inside))
+    rows, cols = slice(max(0, y0 - margin), y1 + 1 + margin), slice(max(0, x0 - margin), x1 + 1 + margin)
+    held_by = labels[rows, cols]
+    inside = box_pixels(np.asarray(box, float) - [cols.start, rows.start] * 2, held_by.shape)
+    colour_index = colour_bins(image[rows, cols], round(len(mine) ** (1 / 3)))
     for label, histogram in theirs.items():
-        held = inside[rows, cols] & (labels[rows, cols] == label)
+        held = inside & (held_by == label)
         if histogram is not None and held.any():
-            log_ratio = colour_log_ratio(image[rows, cols], mine, histogram, sigma_px)
+            log_ratio = colour_log_ratio(colour_index, mine, histogram, sigma_px)
             taken[rows, cols] |= held & (log_ratio > np.log(ratio))
     return taken
 
