@@ -255,7 +255,7 @@ def test_mirrored_landmarks_are_paired_side_by_side_before_averaging() -> None:
     other = reference.copy()
     other[[25, 26]] = other[[26, 25]]  # the mirrored run called them the other way round
     other[0, :2] = [5, 5]
-    paired = swap_sides(other, sides_to_swap(reference.ravel(), other.ravel()))
+    paired = swap_sides(other, sides_to_swap(reference, other))
     np.testing.assert_allclose(paired[[25, 26], :2], reference[[25, 26], :2])
     np.testing.assert_allclose(paired[0, :2], [5, 5])  # unpaired landmarks untouched
 
@@ -688,6 +688,73 @@ def test_the_written_keypoints_are_the_median_over_crops_moved_sideways() -> Non
     points, legs_disputed = model.median_points(image, replace(one_run, legs_disputed=0.0), (0.05,), True, False)
     np.testing.assert_allclose(points, truth, atol=1e-9)
     assert legs_disputed == 0.0  # no mirrored run: nothing disputed
+
+
+def test_the_median_names_each_pair_as_most_crops_do_instead_of_putting_the_two_together() -> None:
+    """A person facing the camera with their arms at rest may be taken, in some crops, for someone seen from behind
+    (every left/right pair named the other way). BlazePose.median_points names each pair as most runs do, and the
+    two points of a pair stay apart: a median across the two namings would put them together."""
+    from dataclasses import replace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS, BlazePose
+
+    region = Region(np.array([200.0, 200.0]), 240.0, 0.0)
+    truth = np.random.default_rng(1).uniform(100, 300, (BODY_LANDMARKS, 2))
+    truth[7], truth[8] = [180.0, 100.0], [220.0, 100.0]  # the ears, 40 px apart
+    exchanged = truth.copy()
+    exchanged[[7, 8]] = exchanged[[8, 7]]
+
+    class Crops(BlazePose):
+        """Each moved crop's two runs (the crop and its mirror) name the ears as the next pair of ``names`` do."""
+
+        def __init__(self, *names: tuple[np.ndarray, np.ndarray]) -> None:  # no model files
+            self.names = iter(names)
+
+        def _crop_runs(self, image, region, refine, mirror):
+            to_crop = np.linalg.inv(np.vstack([crop_affine(region, LANDMARK_SIZE), [0, 0, 1]]))
+            runs = []
+            for names in next(self.names):
+                raw = np.zeros((LANDMARK_COUNT, LANDMARK_VALUES))
+                raw[:BODY_LANDMARKS, :2] = (np.c_[names, np.ones(BODY_LANDMARKS)] @ to_crop.T)[:, :2] + 0.5
+                runs.append((raw.ravel(), 1.0, None, None))
+            return runs, [False]
+
+    image = np.zeros((400, 400, 3), np.uint8)
+    own_runs = replace(_landmarks_at(truth, region), run_points=np.stack([truth, truth]))
+    # both moved crops (four runs of six) name the ears the other way: the median names them so, 40 px apart
+    both = (exchanged, exchanged)
+    points, _ = Crops(both, both).median_points(image, own_runs, (0.03,), True, True)
+    np.testing.assert_allclose(points, exchanged, atol=1e-9)
+    # an even split (three runs of six): the region's own name, the ears as far apart, not midway
+    points, _ = Crops(both, (exchanged, truth)).median_points(image, own_runs, (0.03,), True, True)
+    np.testing.assert_allclose(points, truth, atol=1e-9)
+
+
+def test_landmarks_named_as_other_points_carry_each_joints_own_confidence_and_3d_point() -> None:
+    from dataclasses import replace
+
+    from glimpse.ingest.blazepose import BODY_LANDMARKS
+
+    region = Region(np.array([200.0, 200.0]), 240.0, 0.0)
+    points = np.random.default_rng(2).uniform(100, 300, (BODY_LANDMARKS, 2))
+    visibility = np.linspace(0.1, 0.9, BODY_LANDMARKS)
+    world = np.random.default_rng(3).normal(size=(BODY_LANDMARKS, 3))
+    landmarks = replace(_landmarks_at(points, region), visibility=visibility, world=world)
+    written = points + 1.0
+    written[[11, 12]] = written[[12, 11]]  # the shoulders named the other way
+    renamed = landmarks.named_as(written, 0.5)
+    order = np.arange(BODY_LANDMARKS)
+    order[[11, 12]] = [12, 11]
+    np.testing.assert_array_equal(renamed.points, points[order])
+    np.testing.assert_array_equal(renamed.visibility, visibility[order])
+    np.testing.assert_array_equal(renamed.world, world[order])
+    assert landmarks.named_as(points + 1.0, 0.5) is landmarks  # the same names: nothing to do
+    near = points.copy()
+    near[12] = near[11] + 1.0  # the shoulders a pixel apart (a side-on person): a median's noise decides their names
+    noisy = near.copy()
+    noisy[[11, 12]] = near[11] + [[0.6, 0.6], [0.4, -0.6]]  # nearer named the other way (0.85 times), not clearly
+    assert replace(landmarks, points=near).named_as(noisy, 0.5).points is near
+    assert replace(landmarks, points=near).named_as(noisy, 1.0).points is not near
 
 
 def test_the_fit_settings_an_ingest_writes_and_the_zeros_that_write_none() -> None:

@@ -161,6 +161,18 @@ class PoseLandmarks:
         index = list(COCO17_FROM_BLAZEPOSE)
         return self.points[index], self.visibility[index] * self.presence[index]
 
+    def named_as(self, points: np.ndarray, max_ratio: float) -> PoseLandmarks:
+        """These landmarks with each left/right pair named as ``points`` [33, 2] (image pixels) clearly name it
+        otherwise: points, visibility, presence and 3D together, so that a joint keeps its own confidence and
+        metric 3D point under its new name. Clearly: ``points``' pair lies at most ``max_ratio`` times as far
+        from these landmarks' pair named the other way as from it as named (summed over the two points,
+        :func:`sides_to_swap`); a side-on person's two eyes or shoulders, a pixel apart, keep their names."""
+        pairs = sides_to_swap(self.points, points, max_ratio)
+        if not pairs:
+            return self
+        return replace(self, points=swap_sides(self.points, pairs), visibility=swap_sides(self.visibility, pairs),
+                       presence=swap_sides(self.presence, pairs), world=swap_sides(self.world, pairs))
+
     def coco17_relative3d(self) -> np.ndarray:
         """[17, 3] the COCO-17 landmarks in metres relative to the mid hip, in the image's axes (x right, y down,
         z away from the camera): the model's world landmarks, given in its crop's axes, turned by the crop's
@@ -231,16 +243,17 @@ def unmirror(raw: np.ndarray, world: np.ndarray, segmentation: np.ndarray) -> tu
     return values.ravel(), points.ravel(), segmentation[:, ::-1]
 
 
-def sides_to_swap(reference: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
-    """The left/right landmark pairs of ``other`` ([39 * 5] raw values) that lie closer to ``reference``'s
-    swapped than as named: the model may call a side-on person's left what its mirrored run calls right, and
-    averaging across that would put a knee between the knees (see :func:`swap_sides`)."""
-    ref, out = reference.reshape(-1, LANDMARK_VALUES), other.reshape(-1, LANDMARK_VALUES)
+def sides_to_swap(reference: np.ndarray, other: np.ndarray, max_ratio: float = 1.0) -> list[tuple[int, int]]:
+    """The left/right landmark pairs of ``other`` that lie closer to ``reference``'s swapped than as named (less
+    than ``max_ratio`` times as far, summed over the pair's two points); both [N, C] per-landmark rows (N >= 33)
+    whose first two columns are x and y in one frame (raw values or image pixels). The model may call a side-on person's left what its mirrored run calls right, and a person facing the
+    camera with their arms at rest may be taken, in one crop, for someone seen from behind: averaging across that
+    would put a knee between the knees, or the ears together (see :func:`swap_sides`)."""
     pairs = []
     for left, right in MIRROR_PAIRS:
-        kept = np.linalg.norm(ref[left, :2] - out[left, :2]) + np.linalg.norm(ref[right, :2] - out[right, :2])
-        swapped = np.linalg.norm(ref[left, :2] - out[right, :2]) + np.linalg.norm(ref[right, :2] - out[left, :2])
-        if swapped < kept:
+        a, b = reference[[left, right], :2], other[[left, right], :2]
+        kept, swapped = np.linalg.norm(a - b, axis=1).sum(), np.linalg.norm(a - b[::-1], axis=1).sum()
+        if swapped < max_ratio * kept:
             pairs.append((left, right))
     return pairs
 
@@ -319,7 +332,7 @@ class BlazePose:
         if mirror:
             raw_m, score_m, world_m, segmentation_m = self._landmark_outputs(crop[:, ::-1].copy(), refine)
             raw_m, world_m, segmentation_m = unmirror(raw_m, world_m, segmentation_m)
-            swaps = sides_to_swap(runs[0][0], raw_m)
+            swaps = sides_to_swap(runs[0][0].reshape(-1, LANDMARK_VALUES), raw_m.reshape(-1, LANDMARK_VALUES))
             disputes.append(legs_named_otherwise(swaps))
             raw_m = swap_sides(raw_m.reshape(-1, LANDMARK_VALUES), swaps).ravel()
             world_m = swap_sides(world_m.reshape(-1, 3), swaps).ravel()
@@ -343,16 +356,27 @@ class BlazePose:
         on its region moved sideways (along the crop's x axis) by each of ``shifts`` (fractions of the side), both
         ways, each with its mirror when ``mirror``; and the share of all those mirrored runs that named the legs
         the other way. ``image`` is the one the landmarks were found in. A gross error of a few crops (a knee put
-        on the other leg) moves a median little, where it would move a mean."""
+        on the other leg) moves a median little, where it would move a mean. Each left/right pair is named as most
+        runs name it: a moved crop may take a person facing the camera for one seen from behind, and a median
+        across the two namings would put the ears together; so every run's pairs are named as ``landmarks``' own
+        first run names them (:func:`sides_to_swap`) before the median, which then takes the name most runs gave
+        (an even split keeps the first run's)."""
         region = landmarks.region
         sideways = region.side * np.array([np.cos(region.angle), np.sin(region.angle)])
         points = list(landmarks.run_points if landmarks.run_points is not None else [landmarks.points])
         mirrored = len(points) - 1
         disputed = landmarks.legs_disputed * mirrored
+        swapped: list[tuple[int, int]] = []
         for shift in shifts:
             for sign in (1.0, -1.0):
                 moved = Region(region.centre + sign * shift * sideways, region.side, region.angle)
                 runs, disputes = self._crop_runs(image, moved, refine, mirror)
-                points += [landmark_image_points(run[0], moved)[:BODY_LANDMARKS] for run in runs]
+                for run in runs:
+                    moved_points = landmark_image_points(run[0], moved)[:BODY_LANDMARKS]
+                    swaps = sides_to_swap(points[0], moved_points)
+                    swapped.extend(swaps)
+                    points.append(swap_sides(moved_points, swaps))
                 mirrored, disputed = mirrored + len(disputes), disputed + sum(disputes)
-        return np.median(np.stack(points), axis=0), disputed / mirrored if mirrored else 0.0
+        median = np.median(np.stack(points), axis=0)
+        majority = [pair for pair in sorted(set(swapped)) if 2 * swapped.count(pair) > len(points)]
+        return swap_sides(median, majority), disputed / mirrored if mirrored else 0.0

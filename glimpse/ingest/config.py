@@ -81,6 +81,7 @@ class IngestConfig:
     keypoint_min_confidence: float
     keypoint_smoothing_frames: int
     keypoint_crop_shifts: list[float]
+    keypoint_rename_ratio: float
     keypoints_paint_others: bool
     fit_size_sigma: float
     fit_keypoint_noise_m: float

@@ -42,6 +42,7 @@ class Observation:
     skeleton_distance: np.ndarray | None = None  # [H, W] float32 torso lengths, computed once when first needed
     image: np.ndarray | None = None  # [H, W, 3] the image the landmarks were found in (people painted over or not)
     legs_disputed: float = 0.0  # share of the model's mirrored runs that named the legs the other way
+    relative3d: np.ndarray | None = None  # [17, 3] metric 3D points written with ``keypoints`` (None: landmarks')
 
 
 @dataclass

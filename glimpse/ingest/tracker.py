@@ -167,13 +167,18 @@ class Tracker:
         if config.keypoints_paint_others and others:
             source, landmarks = self._without_others(observation, others, in_front or [False] * len(others))
         if config.keypoint_crop_shifts:
-            median, observation.legs_disputed = self.model.median_points(
+            points, observation.legs_disputed = self.model.median_points(
                 source, landmarks, tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
                 config.landmark_flip_average)
-            observation.keypoints[:, :2] = median[list(COCO17_FROM_BLAZEPOSE)]
         elif landmarks is not observation.landmarks:
-            observation.keypoints[:, :2] = landmarks.coco17()[0]
-            observation.legs_disputed = landmarks.legs_disputed
+            points, observation.legs_disputed = landmarks.points, landmarks.legs_disputed
+        else:
+            return
+        # the confidences and 3D points written beside these points are the observation's own, named as they are
+        # (its landmarks, which tracking goes on with, keep one run's names)
+        named = observation.landmarks.named_as(points, config.keypoint_rename_ratio)
+        observation.keypoints = np.concatenate([points[list(COCO17_FROM_BLAZEPOSE)], named.coco17()[1][:, None]], 1)
+        observation.relative3d = named.coco17_relative3d()
 
     def _without_others(self, observation: Observation, others: list[Observation], in_front: list[bool]
                         ) -> tuple[np.ndarray, PoseLandmarks]:
@@ -480,7 +485,8 @@ class Tracker:
         track.frames.insert(at, frame_id)
         track.keypoints.insert(at, np.concatenate([np.where(confidence[:, None] > 0, points, 0.0),
                                                    confidence[:, None]], 1))
-        relative = observation.landmarks.coco17_relative3d()
+        relative = (observation.relative3d if observation.relative3d is not None
+                    else observation.landmarks.coco17_relative3d())
         track.relative3d.insert(at, np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0),
                                                     confidence[:, None]], 1))
         track.boxes.insert(at, observation.box)
