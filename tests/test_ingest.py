@@ -113,6 +113,12 @@ def test_missing_video(tmp_path: Path) -> None:
         ingest(tmp_path / "nothing.mp4", tmp_path / "scene", CONFIG)
 
 
+def test_a_scene_path_that_is_a_file_is_refused_before_the_video_is_read(tmp_path: Path) -> None:
+    (tmp_path / "scene").write_text("not a scene")
+    with pytest.raises(GlimpseError, match="scene: exists and is not a folder"):
+        ingest(tmp_path / "nothing.mp4", tmp_path / "scene", CONFIG)  # no video either: the scene path comes first
+
+
 @needs_models
 def test_video_without_people_keeps_a_previous_scene(tmp_path: Path) -> None:
     video = _pattern_video(tmp_path / "empty_room.mp4", frames=12, size=(160, 120))

@@ -80,3 +80,35 @@ def test_a_broken_scene_is_refused_and_the_previous_one_kept(tmp_path):
         broken.finish()
     assert load_scene(tmp_path / "scene").name == "first"
     assert (tmp_path / "scene.tmp" / "scene.yaml").is_file()  # kept for inspection
+
+
+def _one_frame_scene(root, value: int):
+    writer = SceneWriter(root, "linked", 25.0, "static", "free")
+    writer.frame(0, np.full((HEIGHT, WIDTH, 3), value, np.uint8))
+    writer.person_mask("alice", 0, np.ones((HEIGHT, WIDTH), bool))
+    writer.keypoints2d("alice", np.arange(1), "coco17", np.ones((1, 17, 3)))
+    return writer.finish()
+
+
+def test_a_scene_path_that_links_to_a_folder_is_written_through_the_link(tmp_path):
+    """A scene folder kept on another disk behind a link: the scene replaces the folder's content, the link stays."""
+    target = tmp_path / "disk" / "scene"
+    _one_frame_scene(target, 10)
+    link = tmp_path / "scene"
+    link.symlink_to(target, target_is_directory=True)
+    assert _one_frame_scene(link, 200) == target.resolve()
+    assert link.is_symlink() and not (tmp_path / "scene.tmp").exists()
+    assert read_rgb(load_scene(link).frame_paths[0])[0, 0, 0] == 200
+
+
+def test_a_scene_path_that_is_a_file_is_refused_before_anything_is_written(tmp_path):
+    from glimpse.errors import GlimpseError
+
+    for path in (tmp_path / "notes.txt", tmp_path / "link_to_notes"):
+        (tmp_path / "notes.txt").write_text("keep me")
+        if path.name == "link_to_notes":
+            path.symlink_to(tmp_path / "notes.txt")
+        with pytest.raises(GlimpseError, match=f"{path.name}: exists and is not a folder"):
+            SceneWriter(path, "refused", 25.0)
+        assert (tmp_path / "notes.txt").read_text() == "keep me"
+        assert not path.with_name(path.name + ".tmp").exists()

@@ -71,7 +71,7 @@ from glimpse.io.images import frame_name, read_rgb
 from glimpse.io.progress import progress
 from glimpse.io.json_file import write_json
 from glimpse.io.video import iter_video_frames, resized, write_mp4
-from glimpse.scene.writer import SceneWriter
+from glimpse.scene.writer import SceneWriter, scene_folder
 
 log = logging.getLogger("glimpse")
 
@@ -356,7 +356,7 @@ def fit_overrides(config: IngestConfig) -> dict[str, dict]:
 
 def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     """Ingest ``video`` into ``scene_dir`` (see the module docstring); returns the tracks report."""
-    video, scene_dir = Path(video), Path(scene_dir)
+    video, scene_dir = Path(video), scene_folder(scene_dir)
     started = time.perf_counter()
     survey = survey_video(video, config)
     model = BlazePose(blazepose_folder(config), config.threads)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from glimpse.errors import SceneError
+from glimpse.errors import GlimpseError, SceneError
 from glimpse.io.images import frame_name, write_png
 from glimpse.scene.model import (
     CAMERAS_FORMAT, EVAL_CAMERAS_FORMAT, KEYPOINT_LAYOUTS, SCENE_FORMAT_VERSION, CameraPose,
@@ -50,12 +50,24 @@ def _mask_png(mask: np.ndarray) -> np.ndarray:
     return np.asarray(mask, dtype=bool).astype(np.uint8) * MASK_ON
 
 
+def scene_folder(root: Path) -> Path:
+    """The folder a scene for ``root`` is written to: ``root`` itself, or the folder it links to (the link stays;
+    a scene folder kept on another disk). Refuses, before anything is computed, a ``root`` that is a file or a
+    link to one, which the finished scene could not replace."""
+    root = Path(root)
+    folder = root.resolve() if root.is_symlink() else root
+    if folder.exists() and not folder.is_dir():
+        raise GlimpseError(f"{root}: exists and is not a folder; the scene is written as a folder there: give "
+                           "another path, or move the file away")
+    return folder
+
+
 class SceneWriter:
     """Writes one scene folder, part by part (see the module docstring)."""
 
     def __init__(self, root: Path, name: str, fps: float, camera_motion: str = "unknown",
                  body_model: str | None = None, overrides: dict[str, dict] | None = None):
-        self.root = Path(root)
+        self.root = scene_folder(root)
         self.staging = self.root.with_name(self.root.name + ".tmp")
         shutil.rmtree(self.staging, ignore_errors=True)
         self.staging.mkdir(parents=True)
