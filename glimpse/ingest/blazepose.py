@@ -164,7 +164,7 @@ class PoseLandmarks:
     def named_as(self, points: np.ndarray, max_ratio: float) -> PoseLandmarks:
         """These landmarks with each left/right pair named as ``points`` [33, 2] (image pixels) clearly name it
         otherwise: points, visibility, presence and 3D together, so that a joint keeps its own confidence and
-        metric 3D point under its new name. Clearly: ``points``' pair lies at most ``max_ratio`` times as far
+        metric 3D point under its new name. Clearly: ``points``' pair lies less than ``max_ratio`` times as far
         from these landmarks' pair named the other way as from it as named (summed over the two points,
         :func:`sides_to_swap`); a side-on person's two eyes or shoulders, a pixel apart, keep their names."""
         pairs = sides_to_swap(self.points, points, max_ratio)
@@ -246,9 +246,10 @@ def unmirror(raw: np.ndarray, world: np.ndarray, segmentation: np.ndarray) -> tu
 def sides_to_swap(reference: np.ndarray, other: np.ndarray, max_ratio: float = 1.0) -> list[tuple[int, int]]:
     """The left/right landmark pairs of ``other`` that lie closer to ``reference``'s swapped than as named (less
     than ``max_ratio`` times as far, summed over the pair's two points); both [N, C] per-landmark rows (N >= 33)
-    whose first two columns are x and y in one frame (raw values or image pixels). The model may call a side-on person's left what its mirrored run calls right, and a person facing the
-    camera with their arms at rest may be taken, in one crop, for someone seen from behind: averaging across that
-    would put a knee between the knees, or the ears together (see :func:`swap_sides`)."""
+    whose first two columns are x and y in one frame (raw values or image pixels). The model may call a side-on
+    person's left what its mirrored run calls right, and a person facing the camera with their arms at rest may be
+    taken, in one crop, for someone seen from behind: averaging across that would put a knee between the knees, or
+    the ears together (see :func:`swap_sides`)."""
     pairs = []
     for left, right in MIRROR_PAIRS:
         a, b = reference[[left, right], :2], other[[left, right], :2]
