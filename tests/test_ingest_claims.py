@@ -148,7 +148,7 @@ def test_the_written_keypoints_see_the_other_people_painted_over(tracker: Tracke
     person, beside = _on_canvas(_observation(100.0, 0.5), 90, 110), _on_canvas(_observation(150.0, 0.5), 140, 160)
     moved = replace(person.landmarks, points=person.landmarks.points + 3.0)
     tracker.model = _RecordingModel(moved)
-    tracker._written_keypoints(person.image, person, [beside])
+    tracker.written_keypoints(person.image, person, [beside])
     (seen,) = tracker.model.images
     assert (seen[beside.mask] == 255).all() and (seen[person.mask] == 0).all()
     assert np.allclose(person.keypoints[:, :2], moved.coco17()[0])
@@ -157,7 +157,7 @@ def test_the_written_keypoints_see_the_other_people_painted_over(tracker: Tracke
     alone = _on_canvas(_observation(100.0, 0.5), 90, 110)
     before = alone.keypoints.copy()
     tracker.model = _RecordingModel(moved)
-    tracker._written_keypoints(alone.image, alone, [far])
+    tracker.written_keypoints(alone.image, alone, [far])
     assert tracker.model.images == [] and np.array_equal(alone.keypoints, before)
 
 
@@ -171,7 +171,7 @@ def test_a_person_in_front_keeps_their_own_pixels_where_someone_behind_overlaps(
     tracker.plate = np.full((120, 400, 3), 255, np.uint8)
     person, other = _on_canvas(_observation(100.0, 0.5), 90, 140), _on_canvas(_observation(150.0, 0.5), 130, 160)
     tracker.model = _RecordingModel(person.landmarks)
-    tracker._written_keypoints(person.image, person, [other], [in_front])
+    tracker.written_keypoints(person.image, person, [other], [in_front])
     (seen,) = tracker.model.images
     nearer_other = observed_skeleton_distance(other) <= observed_skeleton_distance(person)
     shared, only_other = person.mask & other.mask & nearer_other, other.mask & ~person.mask & nearer_other

@@ -832,3 +832,13 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     confidence = people[0].keypoints[..., 2]
     assert (confidence[:, 3] == 0).all() and (confidence[:, [0, 1, 2, 4]] > 0).all()
     assert (people[0].relative3d[:, 3, 3] == 0).all()
+
+
+def test_keypoints_outside_the_image_or_below_the_confidence_are_recorded_as_missing() -> None:
+    from glimpse.ingest.tracker import recorded_keypoints
+
+    keypoints = np.array([[10.0, 20.0, 0.9], [-3.0, 20.0, 0.9], [10.0, 20.0, 0.1], [99.6, 49.0, 0.5],
+                          [99.4, 49.4, 0.3]])
+    recorded = recorded_keypoints(keypoints, (50, 100), 0.2)
+    np.testing.assert_array_equal(recorded[[0, 4]], keypoints[[0, 4]])  # inside (pixel centres up to 99.5, 49.5)
+    np.testing.assert_array_equal(recorded[[1, 2, 3]], np.zeros((3, 3)))

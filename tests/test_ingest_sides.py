@@ -158,3 +158,43 @@ def test_exchanging_legs_swaps_knees_and_ankles_only_in_the_frames_given() -> No
         np.testing.assert_array_equal(out[[0, 2]], values[[0, 2]])
         np.testing.assert_array_equal(out[1, :13], values[1, :13])
         np.testing.assert_array_equal(out[1, [13, 14, 15, 16]], values[1, [14, 13, 16, 15]])
+
+
+def test_a_track_is_made_consistent_by_both_passes_and_its_legs_only_on_a_static_camera() -> None:
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.stage import consistent_sides
+
+    config = load_ingest_config()
+    keypoints, wrong = _side_on_walker(30)
+    frames, disputed = np.arange(30), wrong.astype(float)  # the mirrored runs dispute the names where they are wrong
+    relative3d = np.concatenate([np.random.default_rng(1).normal(size=(30, 17, 3)), np.ones((30, 17, 1))], 2)
+    fixed, fixed_3d, sides, legs = consistent_sides(frames, keypoints, relative3d, disputed, True, 10.0, config)
+    assert not sides.any() and np.array_equal(legs, wrong)
+    expected, expected_3d = exchange_legs(keypoints, relative3d, wrong)
+    np.testing.assert_array_equal(fixed, expected)
+    np.testing.assert_array_equal(fixed_3d, expected_3d)
+    moving = consistent_sides(frames, keypoints, relative3d, disputed, False, 10.0, config)
+    assert not moving[3].any()
+    np.testing.assert_array_equal(moving[0], keypoints)
+    # a run of frames with every pair exchanged (a person facing the camera taken for one seen from behind)
+    facing = _track(12, exchanged=[4, 5, 6])
+    fixed, _, sides, legs = consistent_sides(np.arange(12), facing, np.zeros((12, 17, 4)), np.zeros(12), True, 10.0,
+                                              config)
+    assert np.flatnonzero(sides).tolist() == [4, 5, 6] and not legs.any()
+    np.testing.assert_array_equal(fixed, _track(12, exchanged=[]))
+
+
+def test_a_window_of_frames_names_the_legs_where_the_feet_pass_each_other_in_one_frame() -> None:
+    keypoints, wrong = _side_on_walker(18)
+    named, _ = exchange_legs(keypoints, np.zeros((18, 17, 4)), wrong)  # every frame named right
+    # the swinging right foot passes the planted left one at frame 13, where the model puts both ankles on the
+    # planted one's place and then names the front foot "left" from there to the track's end
+    named[13, [13, 14, 15, 16]] = named[13, [13, 13, 15, 15]]
+    named[13:] = named[13:][:, [*range(13), 14, 13, 16, 15]]
+    disputed = (np.arange(18) >= 13).astype(float)  # the mirrored runs dispute those names; before, they agree
+    frames = np.arange(18)
+    # consecutive frames alone: frame 13 links nothing, and either naming of frames 13-17 costs the same
+    assert not legs_to_exchange(frames, named, disputed, LEGS_KEEP, DISPUTE_SHARE, window=1).any()
+    # over three frames, the left foot planted at frames 11 and 12 is the one named "right" after the crossing
+    exchange = legs_to_exchange(frames, named, disputed, LEGS_KEEP, DISPUTE_SHARE, window=3)
+    assert np.flatnonzero(exchange[:13]).size == 0 and exchange[14:].all()

@@ -92,6 +92,8 @@ class IngestConfig:
     legs_consistent: bool
     legs_keep_weight: float
     legs_dispute_share: float
+    legs_planted_window_s: float
+    legs_planted_discount: float
     border_squeeze_max: float
     border_squeeze_margin: float
     border_squeeze_window_s: float

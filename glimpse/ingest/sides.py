@@ -30,6 +30,13 @@ legs_named_otherwise): where the two runs disagree, the legs' names are a guess.
 the ground, still in the image of a static camera, between every two frames; a frame pair costs the smaller of
 the two ankles' displacements under its labels. Exchanging a frame the runs agree on costs ``keep_weight``; one
 whose mirrored runs mostly disputed the names, nothing.
+
+A foot stays planted for longer than two frames (about 0.6 s of a 1 s stride), and where the feet pass each
+other, between two frames, both ankles lie close together and two frames alone hardly tell which one stayed. So
+every two frames within a window (``window`` frame ids apart at most: ``legs_planted_window_s`` of the video)
+cost their planted foot's displacement (the farther apart, the less: a foot is likelier to have lifted over
+more frames), and the pass keeps the labels of the last ``window`` frames as its state: the frames before the
+crossing, where the feet were apart, then decide it.
 """
 
 from __future__ import annotations
@@ -85,24 +92,6 @@ def _torso_scale(keypoints: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(torso), torso, np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
 
 
-def _cheapest_states(unary: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Viterbi over two states per frame (0: labels kept, 1: exchanged): unary [T, 2] costs of each frame's
-    states, steps [T, 2, 2] costs of going from frame t - 1's state (first index) to frame t's (steps[0] unused)
-    -> [T] bool, the states of the cheapest path (ties keep the labels)."""
-    count = len(unary)
-    cost = unary[0].copy()
-    back = np.zeros((count, 2), int)
-    for t in range(1, count):
-        total = cost[:, None] + steps[t]  # [previous state, this state]
-        back[t] = np.argmin(total, axis=0)
-        cost = total[back[t], [0, 1]] + unary[t]
-    states = np.zeros(count, int)
-    states[-1] = int(np.argmin(cost))
-    for t in range(count - 1, 0, -1):
-        states[t - 1] = back[t, states[t]]
-    return states.astype(bool)
-
-
 def sides_to_exchange(keypoints: np.ndarray, keep_weight: float) -> np.ndarray:
     """[T, 17, 3] one track's COCO-17 keypoints in frame order -> [T] bool: the frames whose left/right pairs
     are to be exchanged (module docstring; ``keep_weight`` in torso lengths per exchanged frame)."""
@@ -114,33 +103,67 @@ def sides_to_exchange(keypoints: np.ndarray, keep_weight: float) -> np.ndarray:
     for t in range(1, count):
         kept, exchanged = side_displacements(keypoints[t - 1], keypoints[t])
         steps[t] = np.array([[kept, exchanged], [exchanged, kept]]) / max(scale[t - 1], scale[t], 1e-6)
-    return _cheapest_states(np.tile([0.0, keep_weight], (count, 1)), steps)
+    return _cheapest_histories(np.tile([0.0, keep_weight], (count, 1)), steps[:, None])
 
 
 def legs_to_exchange(frames: np.ndarray, keypoints: np.ndarray, disputed: np.ndarray, keep_weight: float,
-                     dispute_share: float) -> np.ndarray:
+                     dispute_share: float, window: int = 1, discount: float = 0.0) -> np.ndarray:
     """frames [T] increasing frame ids and [T, 17, 3] COCO-17 keypoints of one track, disputed [T] the share of
     the model's mirrored runs that named the legs the other way -> [T] bool: the frames whose knees and ankles
     are to be exchanged (module docstring, "The legs alone"). Exchanging a frame costs nothing where at least
     ``dispute_share`` of its mirrored runs disputed the names (the names then come from the model's habit, not
-    from the image: they turn with the crop), else ``keep_weight`` torso lengths; consecutive frames (ids one
-    apart) that hold both ankles cost the smaller of the ankles' displacements between them under their two
-    labels, in torso lengths. Ties keep the names."""
+    from the image: they turn with the crop), else ``keep_weight`` torso lengths; every two frames at most
+    ``window`` frame ids and ``window`` track frames apart that both hold both ankles cost the smaller of the
+    ankles' displacements between them under their two labels, in torso lengths, times d ** -``discount`` for
+    frames d apart (a foot planted over more frames is likelier to have lifted). Ties keep the names."""
     count = len(keypoints)
     if count == 0:
         return np.zeros(0, bool)
     scale = _torso_scale(keypoints)
     unary = np.stack([np.zeros(count), np.where(np.asarray(disputed) >= dispute_share, 0.0, keep_weight)], 1)
     ankles, exchanged = list(COCO17_ANKLES), list(COCO17_ANKLES[::-1])
-    steps = np.zeros((count, 2, 2))
+    held = (keypoints[:, ankles, 2] > 0).all(1)
+    # pairs[t, d - 1, state of frame t - d, state of frame t]: the planted foot's displacement between them
+    pairs = np.zeros((count, window, 2, 2))
     for t in range(1, count):
-        before, now = keypoints[t - 1], keypoints[t]
-        if frames[t] - frames[t - 1] == 1 and (before[ankles, 2] > 0).all() and (now[ankles, 2] > 0).all():
+        for back in range(1, min(window, t) + 1):
+            before, now = keypoints[t - back], keypoints[t]
+            if frames[t] - frames[t - back] > window or not (held[t - back] and held[t]):
+                continue
             for previous, order_before in enumerate((ankles, exchanged)):
                 for state, order_now in enumerate((ankles, exchanged)):
                     moved = np.linalg.norm(now[order_now, :2] - before[order_before, :2], axis=1)
-                    steps[t, previous, state] = moved.min() / max(scale[t - 1], scale[t], 1e-6)
-    return _cheapest_states(unary, steps)
+                    pairs[t, back - 1, previous, state] = (moved.min() / max(scale[t - back], scale[t], 1e-6)
+                                                           / back ** discount)
+    return _cheapest_histories(unary, pairs)
+
+
+def _cheapest_histories(unary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Viterbi over the states of the last W frames: unary [T, 2] costs of each frame's two states (0: labels
+    kept, 1: exchanged), pairs [T, W, 2, 2] costs between frame t - d's state and frame t's (d = 1 .. W) -> [T]
+    bool, the states of the cheapest path (ties keep the labels). A history is an integer whose bit j is the
+    state of frame t - j."""
+    count, window = pairs.shape[:2]
+    histories = np.arange(2 ** window)
+    bits = (histories[:, None] >> np.arange(window)) & 1  # [H, W]: bit j of each history
+    cost = np.where(histories < 2, unary[0][histories % 2], np.inf)  # frame 0: no frames before it
+    back = np.zeros((count, 2 ** window), int)
+    for t in range(1, count):
+        # from history h (frame t - 1 first) by state s: frame t - d's state is bit d - 1 of h
+        step = unary[t][None, :] + pairs[t, np.arange(window)[None, :, None], bits[:, :, None],
+                                         np.arange(2)[None, None, :]].sum(1)  # [H, 2]
+        total = cost[:, None] + step
+        following = ((histories[:, None] << 1) | np.arange(2)[None, :]) % (2 ** window)  # [H, 2]
+        order = np.argsort(total, axis=None, kind="stable")[::-1]  # cheapest last: it wins the assignment
+        cost = np.full(2 ** window, np.inf)
+        cost[following.ravel()[order]] = total.ravel()[order]
+        back[t, following.ravel()[order]] = histories[order // 2]
+    states = np.zeros(count, int)
+    history = int(np.argmin(cost))
+    for t in range(count - 1, -1, -1):
+        states[t] = history & 1
+        history = back[t, history]
+    return states.astype(bool)
 
 
 def exchange_legs(keypoints: np.ndarray, relative3d: np.ndarray, exchange: np.ndarray

@@ -78,6 +78,7 @@ log = logging.getLogger("glimpse")
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
 WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
 CHECKPOINT_FILE = "checkpoint.npz"
+LEGS_WINDOW_MAX_FRAMES = 10  # the legs' pass keeps 2^window histories per frame: 1024 at most
 
 
 def blazepose_folder(config: IngestConfig) -> Path:
@@ -119,6 +120,27 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
+def consistent_sides(frames: np.ndarray, keypoints: np.ndarray, relative3d: np.ndarray, legs_disputed: np.ndarray,
+                     static: bool, fps: float, config: IngestConfig
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One track's frames [T] (increasing ids at ``fps``), keypoints [T, 17, 3], relative3d [T, 17, 4] and legs'
+    disputes [T] -> (keypoints, relative3d, [T] bool frames whose left and right were exchanged, [T] bool frames
+    whose legs were): left and right kept consistent along the track (``sides_consistent``), and on a ``static``
+    camera the legs' names decided by a planted foot over ``legs_planted_window_s`` (``legs_consistent``;
+    glimpse.ingest.sides)."""
+    exchange = np.zeros(len(frames), bool)
+    if config.sides_consistent:
+        exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
+        keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
+    legs = np.zeros(len(frames), bool)
+    if config.legs_consistent and static:
+        window = int(np.clip(round(config.legs_planted_window_s * fps), 1, LEGS_WINDOW_MAX_FRAMES))
+        legs = legs_to_exchange(frames, keypoints, legs_disputed, config.legs_keep_weight, config.legs_dispute_share,
+                                window, config.legs_planted_discount)
+        keypoints, relative3d = exchange_legs(keypoints, relative3d, legs)
+    return keypoints, relative3d, exchange, legs
+
+
 def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                  labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames (not counting frames looked at again) whose box is usually
@@ -138,16 +160,9 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
     people = []
     for k, track in enumerate(kept):
         frames, track_boxes = np.array(track.frames), np.stack(track.boxes)  # boxes at the tracking size
-        keypoints, relative3d = np.stack(track.keypoints), np.stack(track.relative3d)
-        exchange = np.zeros(len(track.frames), bool)
-        if config.sides_consistent:
-            exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
-            keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
-        legs = np.zeros(len(track.frames), bool)
-        if config.legs_consistent and survey.static:
-            legs = legs_to_exchange(frames, keypoints, np.array(track.legs_disputed), config.legs_keep_weight,
-                                    config.legs_dispute_share)
-            keypoints, relative3d = exchange_legs(keypoints, relative3d, legs)
+        keypoints, relative3d, exchange, legs = consistent_sides(
+            frames, np.stack(track.keypoints), np.stack(track.relative3d), np.array(track.legs_disputed),
+            survey.static, survey.fps, config)
         squeezed = np.zeros(len(track.frames), bool)
         if config.border_squeeze_max > 0:
             squeezed = squeezed_at_border(frames / survey.fps, keypoints, track_boxes,

@@ -68,6 +68,15 @@ STILL_WIDTH = 0.02  # fraction of the frame's height: where the plate shows a fo
 # this wide, they stood still (specks where their colour matches the background's are painted by the plate)
 
 
+def recorded_keypoints(keypoints: np.ndarray, shape: tuple[int, int], min_confidence: float) -> np.ndarray:
+    """[17, 3] keypoints (pixels, confidence) of an image of ``shape`` (H, W) -> the same with those outside the
+    image or below ``min_confidence`` missing (confidence 0, position 0)."""
+    points, confidence = keypoints[:, :2], keypoints[:, 2]
+    confidence = np.where(outside_image(points, shape), 0.0, confidence)
+    confidence = np.where(confidence >= min_confidence, confidence, 0.0)
+    return np.concatenate([np.where(confidence[:, None] > 0, points, 0.0), confidence[:, None]], 1)
+
+
 class Tracker:
     """Runs the per-frame steps of the module docstring; ``tracks`` holds every track ever started."""
 
@@ -137,7 +146,7 @@ class Tracker:
                 continue
             others = [o for index, o in followed.items() if index != track.index]
             in_front = [nearness[track.index] < nearness[index] for index in followed if index != track.index]
-            self._written_keypoints(image, observation, others, in_front)
+            self.written_keypoints(image, observation, others, in_front)
             self._update(track, observation, frame_id, self._clear_of(observation, others))
             result.append((track, observation))
         return result
@@ -150,8 +159,8 @@ class Tracker:
         return {index: nearness_rank(tracks[index], observation, config.mask_depth_cue, config.mask_depth_frames)
                 for index, observation in followed.items()}
 
-    def _written_keypoints(self, image: np.ndarray, observation: Observation,
-                           others: list[Observation] | None = None, in_front: list[bool] | None = None) -> None:
+    def written_keypoints(self, image: np.ndarray, observation: Observation,
+                          others: list[Observation] | None = None, in_front: list[bool] | None = None) -> None:
         """Set the keypoints the scene gets: the user's pose model's, or the median of BlazePose's runs over
         shifted crops (``keypoint_crop_shifts``), else the observation's own. With ``keypoints_paint_others``,
         BlazePose's runs see the ``others`` found in the frame painted over (:meth:`_without_others`; ``in_front``:
@@ -220,7 +229,7 @@ class Tracker:
         if (self._lies_on(observation, others, config.track_behind_max_overlap)
                 or not looks_like(track, observation, config.track_reid_max_distance)):
             return None
-        self._written_keypoints(image, observation)
+        self.written_keypoints(image, observation)
         if self._lies_on(observation, others, config.track_backfill_keypoints_max_overlap):
             observation.keypoints[:, 2] = 0.0
         self._record(track, observation, frame_id)
@@ -478,13 +487,12 @@ class Tracker:
     def _record(self, track: Track, observation: Observation, frame_id: int) -> None:
         """Add the observation's keypoints (those outside the image or below ``keypoint_min_confidence`` at
         confidence 0), 3D landmarks, box and legs' dispute to the track's per-frame lists, in frame order."""
-        points, confidence = observation.keypoints[:, :2], observation.keypoints[:, 2]
-        confidence = np.where(outside_image(points, observation.mask.shape), 0.0, confidence)
-        confidence = np.where(confidence >= self.config.keypoint_min_confidence, confidence, 0.0)
+        keypoints = recorded_keypoints(observation.keypoints, observation.mask.shape,
+                                       self.config.keypoint_min_confidence)
+        confidence = keypoints[:, 2]
         at = bisect.bisect(track.frames, frame_id)
         track.frames.insert(at, frame_id)
-        track.keypoints.insert(at, np.concatenate([np.where(confidence[:, None] > 0, points, 0.0),
-                                                   confidence[:, None]], 1))
+        track.keypoints.insert(at, keypoints)
         relative = (observation.relative3d if observation.relative3d is not None
                     else observation.landmarks.coco17_relative3d())
         track.relative3d.insert(at, np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0),
