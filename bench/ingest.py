@@ -46,6 +46,7 @@ from glimpse.ingest.blazepose import REGION_GROW, BlazePose
 from glimpse.ingest.config import IngestConfig, load_ingest_config
 from glimpse.ingest.crop import Region, region_from_alignment
 from glimpse.ingest.evaluate import HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, pck, score_people
+from glimpse.ingest.sides import HIPS, SHOULDERS
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_models
 from glimpse.ingest.tracker import Tracker, recorded_keypoints
@@ -59,7 +60,6 @@ PCK_FRACTION = 0.1
 JOINT_MASK_REACH_PX = 2  # a joint counts as visible when the person's visible mask is within this many pixels
 OWN_BODY_MARGIN_M = 0.05  # a joint is behind its own body when deeper than this past its own skin (clothing, curvature)
 HEAD_TOP_REACH = 1.15  # the top of the head (or a raised hand's end) from the mid hip, per the farthest COCO-17 point
-COCO17_HIPS, COCO17_SHOULDERS = (11, 12), (5, 6)
 
 
 def true_people(scene_dir: Path, layouts: tuple[str, ...]) -> dict[str, dict[int, dict[str, TruePerson]]]:
@@ -149,7 +149,7 @@ def reference_region(joints: np.ndarray) -> Region:
     """The landmark model's region for a person whose COCO-17 points [17, 2] (pixels, hidden ones too) are known,
     as MediaPipe's alignment places it: centred on the mid hip, the mid shoulder up, its half side the farthest
     point's distance from the mid hip times HEAD_TOP_REACH, grown as the model's crop is."""
-    hips, shoulders = joints[list(COCO17_HIPS)].mean(0), joints[list(COCO17_SHOULDERS)].mean(0)
+    hips, shoulders = joints[list(HIPS)].mean(0), joints[list(SHOULDERS)].mean(0)
     up = (shoulders - hips) / max(float(np.linalg.norm(shoulders - hips)), 1e-6)
     reach = float(np.linalg.norm(joints - hips, axis=1).max()) * HEAD_TOP_REACH
     return region_from_alignment(hips, hips + up * reach, REGION_GROW)

@@ -190,22 +190,24 @@ def test_ingest_writes_a_valid_scene_with_both_people(demo_video, ingested) -> N
     assert preview.shape[0] == len(truth.frame_ids)
 
 
-@needs_models
-def test_ingest_finds_and_follows_each_true_person(demo_video, ingested) -> None:
+def _bench_ingest():
+    """bench/ingest.py, the benchmark's ground-truth side, as a module."""
+    import importlib
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    from ingest import (  # bench/ingest.py: the ground-truth side of the benchmark
-        found_people,
-        true_people,
-    )
+    return importlib.import_module("ingest")
 
+
+@needs_models
+def test_ingest_finds_and_follows_each_true_person(demo_video, ingested) -> None:
     from glimpse.ingest.evaluate import score_people
 
+    bench = _bench_ingest()
     fixture, _ = demo_video
     scene_dir, _ = ingested
-    truth = true_people(fixture, ("coco17_skin",))["coco17_skin"]
-    scores = score_people(truth, found_people(scene_dir), pck_fraction=0.2)
+    truth = bench.true_people(fixture, ("coco17_skin",))["coco17_skin"]
+    scores = score_people(truth, bench.found_people(scene_dir), pck_fraction=0.2)
     assert sorted(scores) == ["p0", "p1"]
     found_as = [s.ids for s in scores.values()]
     for pid, score in scores.items():
@@ -420,15 +422,6 @@ def test_a_static_video_with_a_focal_length_gets_cameras_json(demo_video, tmp_pa
     scene = load_scene(tmp_path / "scene")
     assert report["focal_35mm_equivalent"] == 30.0 and scene.cameras is not None
     np.testing.assert_allclose(scene.cameras.K, intrinsics_from_focal(30.0, scene.width, scene.height))
-
-
-def _bench_ingest():
-    """bench/ingest.py, the benchmark's ground-truth side, as a module."""
-    import importlib
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    return importlib.import_module("ingest")
 
 
 def test_the_reference_region_is_mediapipes_alignment_square() -> None:
