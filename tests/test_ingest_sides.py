@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from glimpse.ingest.sides import (
     COCO17_EXCHANGE,
@@ -198,3 +199,23 @@ def test_a_window_of_frames_names_the_legs_where_the_feet_pass_each_other_in_one
     # over three frames, the left foot planted at frames 11 and 12 is the one named "right" after the crossing
     exchange = legs_to_exchange(frames, named, disputed, LEGS_KEEP, DISPUTE_SHARE, window=3)
     assert np.flatnonzero(exchange[:13]).size == 0 and exchange[14:].all()
+
+
+def test_the_cheapest_histories_are_the_cheapest_labelling_of_all() -> None:
+    """Against every one of the 2^T labellings: the cost of each frame's state plus that of every two frames up to
+    the window apart."""
+    import itertools
+
+    from glimpse.ingest.sides import _cheapest_histories
+
+    rng = np.random.default_rng(0)
+    for count, window in ((1, 1), (6, 1), (7, 3), (9, 4)):
+        unary, pairs = rng.random((count, 2)), rng.random((count, window, 2, 2))
+
+        def cost(states: tuple[int, ...]) -> float:
+            return sum(unary[t, states[t]] + sum(pairs[t, d - 1, states[t - d], states[t]]
+                                                 for d in range(1, min(window, t) + 1)) for t in range(count))
+
+        best = min(cost(states) for states in itertools.product((0, 1), repeat=count))
+        found = tuple(int(s) for s in _cheapest_histories(unary, pairs))
+        assert cost(found) == pytest.approx(best)

@@ -140,24 +140,27 @@ def legs_to_exchange(frames: np.ndarray, keypoints: np.ndarray, disputed: np.nda
 
 def _cheapest_histories(unary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """Viterbi over the states of the last W frames: unary [T, 2] costs of each frame's two states (0: labels
-    kept, 1: exchanged), pairs [T, W, 2, 2] costs between frame t - d's state and frame t's (d = 1 .. W) -> [T]
-    bool, the states of the cheapest path (ties keep the labels). A history is an integer whose bit j is the
-    state of frame t - j."""
+    kept, 1: exchanged), pairs [T, W, 2, 2] costs between frame t - d's state and frame t's (d = 1 .. W; those
+    with t - d < 0 name no frame and are not counted) -> [T] bool, the states of the cheapest path (ties keep the
+    labels). A history is an integer whose bit j is the state of frame t - j."""
     count, window = pairs.shape[:2]
+    pairs = np.where((np.arange(count)[:, None] >= np.arange(1, window + 1))[:, :, None, None], pairs, 0.0)
     histories = np.arange(2 ** window)
     bits = (histories[:, None] >> np.arange(window)) & 1  # [H, W]: bit j of each history
     cost = np.where(histories < 2, unary[0][histories % 2], np.inf)  # frame 0: no frames before it
     back = np.zeros((count, 2 ** window), int)
+    # history g after frame t comes from the two histories h whose bits 0 .. W - 2 are g's bits 1 .. W - 1 (the
+    # oldest state, bit W - 1 of h, is forgotten) by frame t's state s = bit 0 of g
+    newest = histories & 1
+    sources = (histories >> 1)[None, :] | (np.arange(2)[:, None] << (window - 1))  # [2, H]: oldest bit 0, 1
     for t in range(1, count):
         # from history h (frame t - 1 first) by state s: frame t - d's state is bit d - 1 of h
         step = unary[t][None, :] + pairs[t, np.arange(window)[None, :, None], bits[:, :, None],
                                          np.arange(2)[None, None, :]].sum(1)  # [H, 2]
-        total = cost[:, None] + step
-        following = ((histories[:, None] << 1) | np.arange(2)[None, :]) % (2 ** window)  # [H, 2]
-        order = np.argsort(total, axis=None, kind="stable")[::-1]  # cheapest last: it wins the assignment
-        cost = np.full(2 ** window, np.inf)
-        cost[following.ravel()[order]] = total.ravel()[order]
-        back[t, following.ravel()[order]] = histories[order // 2]
+        total = (cost[:, None] + step)[sources, newest[None, :]]  # [2, H]
+        oldest = np.argmin(total, axis=0)  # ties: the source whose forgotten state kept the labels
+        cost = total[oldest, histories]
+        back[t] = sources[oldest, histories]
     states = np.zeros(count, int)
     history = int(np.argmin(cost))
     for t in range(count - 1, -1, -1):
