@@ -11,6 +11,7 @@ import pytest
 
 from glimpse.ingest.appearance import appearance_distance
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
+from glimpse.ingest.claims import return_refound
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
 from glimpse.ingest.observation import Observation, Track, observed_skeleton_distance
@@ -80,6 +81,28 @@ def test_a_person_found_behind_by_the_wrong_track_first_is_taken_back_by_their_o
     assert sorted(followed) == [0, 1] and followed[0] is walker and followed[1] is standing
     # the walker's track looking first: one look each; else the taking back costs two looks more
     assert looks == ([0, 1] if order == (0, 1) else [1, 0, 0, 1])
+
+
+@pytest.mark.parametrize("case", ["returned", "other region", "no better", "other also missing", "other found"])
+def test_whom_a_lost_track_finds_in_its_old_region_goes_to_the_track_they_look_like(tracker: Tracker,
+                                                                                   case: str) -> None:
+    """A track missing for two frames finds, in the region where its person was last seen, someone who looks 0.41
+    from it (within the follow distance); a track seen in the last frame (0.28 from them), whose region lies over them
+    too, found nobody. The person goes to that track, as they look like it better by more than the reclaim
+    margin, and stays with the lost track when the other's region lies elsewhere, it looks no better, it was
+    missing too, or it found someone itself."""
+    lost, own = _track(0, 100.0, 0.3, missing=2), _track(1, 110.0 if case != "other region" else 300.0, 1.0)
+    if case == "no better":
+        own.look = _look(0.3)
+    if case == "other also missing":
+        own.missing = 1
+    tracker.tracks = [lost, own]
+    person = _observation(106.0, 0.85)
+    assert appearance_distance(lost.look, person.look) <= tracker.config.track_follow_max_distance
+    followed = {0: person} if case != "other found" else {0: person, 1: _observation(112.0, 1.0)}
+    before = dict(followed)
+    return_refound(followed, [lost, own], tracker.config.track_reclaim_margin)
+    assert followed == ({1: person} if case == "returned" else before)
 
 
 def test_two_finds_of_two_people_are_both_kept_with_one_look_each(tracker: Tracker) -> None:

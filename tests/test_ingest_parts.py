@@ -616,9 +616,9 @@ def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the
 
 def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_that_tracks_person() -> None:
     from glimpse.ingest.blazepose import BODY_LANDMARKS
+    from glimpse.ingest.claims import reclaim
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.observation import Observation, Track
-    from glimpse.ingest.tracker import Tracker
 
     def look(red: float) -> np.ndarray:  # two halves of 4 bins, normalised
         half = np.array([red, 1.0 - red, 0.0, 0.0])
@@ -629,19 +629,17 @@ def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_tha
         return Observation(_landmarks_at(np.tile([x, 50.0], (BODY_LANDMARKS, 1)), region), None, None,
                            np.array([x - 10, 10, x + 10, 90]), look(colour), 1.0, np.ones((17, 3)))
 
-    tracker = Tracker.__new__(Tracker)
-    tracker.config = load_ingest_config()
+    margin = load_ingest_config().track_reclaim_margin
     adult = Track(0, None, look(1.0))
-    tracker.tracks = [adult]
     slid = observation(50.0, 0.6)  # half on the child in front: looks 0.6 like the adult
     followed = {0: slid}
     elsewhere, adult_found = observation(200.0, 1.0), observation(60.0, 0.95)
     fresh = [elsewhere, adult_found]
-    tracker._reclaim(fresh, followed)
+    reclaim(fresh, followed, [adult], margin)
     # far away: not the track's person, whatever they look like
     assert followed[0] is adult_found and len(fresh) == 1 and fresh[0] is elsewhere
     followed, fresh = {0: slid}, [observation(60.0, 0.65)]  # hardly better: a new person beside them
-    tracker._reclaim(fresh, followed)
+    reclaim(fresh, followed, [adult], margin)
     assert followed[0] is slid and len(fresh) == 1
 
 

@@ -5,7 +5,8 @@ Per frame (BlazePose's own scheme, extended to several people):
 1. **Follow.** Every track looks for its person in the region its last landmarks predicted (moved by the
    track's velocity); the landmark model's presence score says whether the person is still there, and
    whoever is there must look like the track (``track_follow_max_distance``), else the region slid onto
-   someone else.
+   someone else. Whom a track that had lost its person finds so goes to a track that found nobody, whose region
+   lies over them too, when they look like it clearly better (``track_reclaim_margin``).
 2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
    someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
    behind*: its region again with the people already found painted over by the background plate (where the
@@ -25,6 +26,7 @@ Per frame (BlazePose's own scheme, extended to several people):
 4. **Reclaim and re-identify.** A new observation that overlaps what a track followed and looks like that track
    clearly better is the track's person (the followed fit had slid half onto someone else). The others are
    matched to hidden and lost tracks by appearance (Hungarian method); what stays unmatched starts a new track.
+   (The rules that give a person from one track to another are in :mod:`glimpse.ingest.claims`.)
 
 Masks are depth-ordered (:mod:`glimpse.ingest.depth_order`): people are ranked by where their feet are in the
 image (lower = nearer, for people on one floor), or by a depth proxy (metric bone lengths from the landmark model's
@@ -40,8 +42,9 @@ import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from glimpse.ingest.appearance import appearance, appearance_distance, blend, comparable
+from glimpse.ingest.appearance import appearance, appearance_distance, blend
 from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, BlazePose, PoseLandmarks, box_iou
+from glimpse.ingest.claims import reclaim, return_refound
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, outside_image, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
@@ -130,10 +133,11 @@ class Tracker:
                 continue
             if looks_like(track, observation, config.track_follow_max_distance):
                 followed[track.index] = observation
+        return_refound(followed, live, config.track_reclaim_margin)
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
         self._look_behind_all(image, followed, [t for t in live if t.index in behind])
         fresh = self._find_new(image, list(followed.values()))
-        self._reclaim(fresh, followed)
+        reclaim(fresh, followed, self.tracks, config.track_reclaim_margin)
         assigned = self._assign(fresh, [t for t in live if t.index not in followed], frame_id)
         for track, observation in assigned:
             followed[track.index] = observation
@@ -416,25 +420,6 @@ class Tracker:
         ``pixels`` [H, W] bool."""
         body = self._body_pixels(observation)
         return np.count_nonzero(body & pixels) > max_overlap * max(np.count_nonzero(body), 1)
-
-    def _reclaim(self, fresh: list[Observation], followed: dict[int, Observation]) -> None:
-        """A new observation that overlaps what a track followed this frame and looks like that track better, by
-        more than ``track_reclaim_margin``, is the track's person: the followed fit had slid half onto someone
-        else (a crossing). The track takes it (removed from ``fresh``); the followed fit is dropped."""
-        tracks = {t.index: t for t in self.tracks}
-        for observation in list(fresh):
-            best, best_gain = None, self.config.track_reclaim_margin
-            for index, current in followed.items():
-                look = tracks[index].look
-                apart = box_iou(observation.box[None], current.box[None])[0, 0] == 0
-                if apart or not comparable(look, observation.look):
-                    continue
-                gain = appearance_distance(look, current.look) - appearance_distance(look, observation.look)
-                if gain > best_gain:
-                    best, best_gain = index, gain
-            if best is not None:
-                followed[best] = observation
-                fresh[:] = [other for other in fresh if other is not observation]
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
         """Match new observations to tracks not seen this frame (Hungarian, on appearance); start the rest."""

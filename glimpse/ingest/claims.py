@@ -1,0 +1,53 @@
+"""Who gets a person two tracks could claim, by appearance and by where the tracks' regions lie: the rules of the
+tracker's steps 1 and 4 (glimpse.ingest.tracker) that move an observation from one track, or from the new people,
+to another. Each changes its dicts and lists in place."""
+
+from __future__ import annotations
+
+from glimpse.ingest.appearance import appearance_distance, comparable
+from glimpse.ingest.blazepose import box_iou
+from glimpse.ingest.observation import Observation, Track
+
+
+def return_refound(followed: dict[int, Observation], live: list[Track], margin: float) -> None:
+    """Whom a track missing until this frame found in its region (a region left where its person was last seen,
+    which someone else may have walked into) goes to a track seen in the last frame that found nobody, whose
+    predicted region overlaps them and whom they look like better by more than ``margin`` (appearance distance):
+    that track's person, whom its own region, over them and someone else, did not show the landmark model alone.
+    ``followed``: track index -> what it found this frame; ``live``: the tracks that looked."""
+    empty = [t for t in live if t.missing == 0 and t.index not in followed]
+    for track in [t for t in live if t.missing and t.index in followed]:
+        observation = followed[track.index]
+        best, best_gain = None, margin
+        for other in empty:
+            overlaps = box_iou(other.predicted_region().box()[None], observation.box[None])[0, 0] > 0
+            if not overlaps or not comparable(other.look, observation.look):
+                continue
+            gain = appearance_distance(track.look, observation.look) - appearance_distance(other.look,
+                                                                                            observation.look)
+            if gain > best_gain:
+                best, best_gain = other, gain
+        if best is not None:
+            del followed[track.index]
+            followed[best.index] = observation
+            empty.remove(best)
+
+
+def reclaim(fresh: list[Observation], followed: dict[int, Observation], tracks: list[Track], margin: float) -> None:
+    """A new observation (of ``fresh``) that overlaps what a track followed this frame and looks like that track
+    better, by more than ``margin``, is the track's person: the followed fit had slid half onto someone else (a
+    crossing). The track takes it (removed from ``fresh``); the followed fit is dropped. ``tracks``: every track."""
+    by_index = {t.index: t for t in tracks}
+    for observation in list(fresh):
+        best, best_gain = None, margin
+        for index, current in followed.items():
+            look = by_index[index].look
+            apart = box_iou(observation.box[None], current.box[None])[0, 0] == 0
+            if apart or not comparable(look, observation.look):
+                continue
+            gain = appearance_distance(look, current.look) - appearance_distance(look, observation.look)
+            if gain > best_gain:
+                best, best_gain = index, gain
+        if best is not None:
+            followed[best] = observation
+            fresh[:] = [other for other in fresh if other is not observation]
