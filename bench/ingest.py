@@ -48,7 +48,7 @@ from glimpse.ingest.crop import Region, region_from_alignment
 from glimpse.ingest.evaluate import HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, pck, score_people
 from glimpse.ingest.sides import HIPS, SHOULDERS
 from glimpse.ingest.smoothing import smooth_keypoints
-from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_models
+from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_pose
 from glimpse.ingest.tracker import Tracker, recorded_keypoints
 from glimpse.io.images import frame_files, read_mask, read_rgb
 from glimpse.io.video import write_mp4
@@ -162,7 +162,7 @@ def model_reference(fixture: Path, truth: dict[int, dict[str, TruePerson]], conf
     fixture's frames must be at the tracking size (its longer side at most ``track_max_side``)."""
     scene = load_scene(fixture)
     backgrounds = frame_files(fixture.with_name(fixture.name + ".groundtruth") / "background")
-    tracker = Tracker(BlazePose(blazepose_folder(config), config.threads), config, None, pose=user_models(config)[1])
+    tracker = Tracker(BlazePose(blazepose_folder(config), config.threads), config, None, pose=user_pose(config))
     people = sorted({pid for frame in truth.values() for pid in frame})
     out = {}
     for pid in people:

@@ -86,13 +86,19 @@ def blazepose_folder(config: IngestConfig) -> Path:
     return folder if folder.is_absolute() else REPO_ROOT / folder
 
 
-def user_models(config: IngestConfig) -> tuple[OnnxDetector | None, OnnxPose | None]:
-    """The ONNX detector and pose model the parameters ask for (None: BlazePose's own)."""
-    detector = (OnnxDetector(config.detector_onnx_path, config.detector_onnx_kind, config.detector_onnx_min_score,
-                             config.threads) if config.detector == "onnx" else None)
-    pose = (OnnxPose(config.pose_onnx_path, config.pose_onnx_box_padding, config.threads) if config.pose == "onnx"
-            else None)
-    return detector, pose
+def user_detector(config: IngestConfig) -> OnnxDetector | None:
+    """The ONNX detector the parameters ask for (None: BlazePose's own)."""
+    if config.detector != "onnx":
+        return None
+    return OnnxDetector(config.detector_onnx_path, config.detector_onnx_kind, config.detector_onnx_min_score,
+                        config.threads)
+
+
+def user_pose(config: IngestConfig) -> OnnxPose | None:
+    """The ONNX pose model the parameters ask for (None: BlazePose's landmarks)."""
+    if config.pose != "onnx":
+        return None
+    return OnnxPose(config.pose_onnx_path, config.pose_onnx_box_padding, config.threads)
 
 
 def _label_path(work: Path, frame_id: int) -> Path:
@@ -375,7 +381,7 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     started = time.perf_counter()
     survey = survey_video(video, config)
     model = BlazePose(blazepose_folder(config), config.threads)
-    user_detector, user_pose = user_models(config)
+    detector, pose = user_detector(config), user_pose(config)
     log.info("%s: %dx%d at %.3g fps -> %d frames at %dx%d, camera motion %.3g of the diagonal", video,
              survey.info.width, survey.info.height, survey.fps, len(survey.chosen), survey.width, survey.height,
              survey.motion.motion)
@@ -383,7 +389,7 @@ def ingest(video: Path, scene_dir: Path, config: IngestConfig) -> dict:
     writer = SceneWriter(scene_dir, scene_name_of(video), survey.fps, "static" if survey.static else "moving",
                          overrides=fit_overrides(config))
     work = scene_dir.with_name(scene_dir.name + WORK_SUFFIX)
-    tracker = Tracker(model, config, survey.plate, user_detector, user_pose)
+    tracker = Tracker(model, config, survey.plate, detector, pose)
     key = fingerprint(video, config)
     resumed = load_checkpoint(work / CHECKPOINT_FILE, key)
     if resumed is None:
