@@ -96,7 +96,6 @@ def test_whom_a_lost_track_finds_in_its_old_region_goes_to_the_track_they_look_l
         own.look = _look(0.3)
     if case == "other also missing":
         own.missing = 1
-    tracker.tracks = [lost, own]
     person = _observation(106.0, 0.85)
     assert appearance_distance(lost.look, person.look) <= tracker.config.track_follow_max_distance
     followed = {0: person} if case != "other found" else {0: person, 1: _observation(112.0, 1.0)}
