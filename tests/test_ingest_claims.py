@@ -1,6 +1,7 @@
-"""Who gets a person two tracks could claim when several look behind the people found, and which observations a
-track's appearance follows. The landmark model is not run: the rules are what is tested; the whole ingest
-runs on rendered videos in test_ingest.py."""
+"""Who gets a person two tracks could claim (when several look behind the people found, when a lost track finds
+someone in its old region), which observations a track's appearance follows, and which finds in the foreground are
+kept. The landmark model is not run: the rules are what is tested; the whole ingest runs on rendered videos in
+test_ingest.py."""
 
 from __future__ import annotations
 
@@ -202,3 +203,16 @@ def test_a_person_in_front_keeps_their_own_pixels_where_someone_behind_overlaps(
     region[:, max(x0, 0):x1] = True
     assert shared.any() and (only_other & region).any()
     assert (seen[only_other] == 255).all() and (seen[shared] == (0 if in_front else 255)).all()
+
+
+@pytest.mark.parametrize("columns_changed, kept", [(0, False), (2, False), (6, True)])
+def test_someone_found_in_the_foreground_must_in_part_differ_from_the_plate(tracker: Tracker, columns_changed: int,
+                                                                           kept: bool) -> None:
+    """A fit in a foreground region whose body the plate shows as the frame does (a painted pillar beside the person
+    who made the foreground) is something the plate holds; it is kept when at least ``foreground_min_differing``
+    (a fifth) of its body's pixels differ from the plate: here 0, 2 or 6 of its 20 columns."""
+    tracker.plate = np.full((120, 400, 3), 90, np.uint8)
+    found = _on_canvas(_observation(100.0, 0.5), 90, 110)
+    image = tracker.plate.copy()
+    image[20:100, 90:90 + columns_changed] = 250
+    assert tracker._shown_by_plate(image, found) != kept

@@ -59,6 +59,7 @@ class IngestConfig:
     foreground_close: float
     foreground_person_aspect: float
     foreground_rounds: int
+    foreground_min_differing: float
     gap_masks: bool
     gap_mask_max_frames: int
     gap_mask_box_grow: float

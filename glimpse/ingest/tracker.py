@@ -20,9 +20,9 @@ Per frame (BlazePose's own scheme, extended to several people):
    from the background plate and no found person's body explains (people seen from behind, whom the
    face-keyed detector misses; :mod:`glimpse.ingest.foreground`: blobs of people side by side are also cut
    into person-wide windows, looked at with the rest painted over by the plate, and what remains is looked
-   at again after a round that found someone). A candidate no found person covers is looked at by the
-   landmark model, with the people found painted over; what it finds is kept unless it is someone found
-   already or lies mostly on their bodies.
+   at again after a round that found someone; whoever is found there must in part differ from the plate). A
+   candidate no found person covers is looked at by the landmark model, with the people found painted over;
+   what it finds is kept unless it is someone found already or lies mostly on their bodies.
 4. **Reclaim and re-identify.** A new observation that overlaps what a track followed and looks like that track
    clearly better is the track's person (the followed fit had slid half onto someone else). The others are
    matched to hidden and lost tracks by appearance (Hungarian method); what stays unmatched starts a new track.
@@ -389,10 +389,23 @@ class Tracker:
                     continue
                 tried = np.concatenate([tried, box[None]])
                 painted = self._painted_over(image, candidate.paint)
-                self._keep_new(self.observe(painted, candidate.region, image, candidate.paint), observed, fresh)
+                observation = self.observe(painted, candidate.region, image, candidate.paint)
+                if observation is not None and self._shown_by_plate(image, observation):
+                    continue
+                self._keep_new(observation, observed, fresh)
             if len(fresh) == found_before:
                 break
         return fresh
+
+    def _shown_by_plate(self, image: np.ndarray, observation: Observation) -> bool:
+        """Whether less than ``foreground_min_differing`` of the observation's body pixels differ from the plate in
+        ``image``: what the landmark model fitted in a foreground region is something the plate shows (a painted
+        pillar beside the person who made the foreground), not who made it."""
+        body = self._body_pixels(observation)
+        if not body.any():
+            return False
+        differing = differs_from_plate(image[body], self.plate[body], self.config.foreground_threshold)
+        return float(differing.mean()) < self.config.foreground_min_differing
 
     def _keep_new(self, observation: Observation | None, observed: list[Observation], fresh: list[Observation],
                   found_bodies: np.ndarray | None = None) -> None:
