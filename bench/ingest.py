@@ -15,10 +15,11 @@ With --model-reference, also what the keypoint model gives each person when it i
 frame, the other people's visible pixels replaced by the fixture's true background and the landmark model's
 region placed from the person's true joints (as MediaPipe's alignment places it, then re-centred as the
 tracker does), then the ingest's own keypoint steps (the median over moved and mirrored crops, the confidence
-threshold, left, right and legs kept consistent along the track, smoothing). Tracking that found everyone and
-painted the others perfectly would give about that (the tracker's regions differ: not a strict bound); where
-the ingest falls short of it, the tracker lost the person or their keypoints, and where it is itself under the
-target, the model is (its PCK counts the same joints and frames as the ingest's).
+threshold, left, right and legs kept consistent along the track, smoothing), and the segmentation snapped to the
+frame's edges as the written masks are. Tracking that found everyone and painted the others perfectly would give
+about that (the tracker's regions differ: not a strict bound); where the ingest falls short of it, the tracker
+lost the person or their keypoints, and where it is itself under the target, the model is (its PCK and IoU count
+the same joints and frames as the ingest's).
 
     python bench/ingest.py [--scenarios demo,crowd] [--seed 0] [--work DIR] [--params "ingest.key=value ..."]
                            [--model-reference]
@@ -31,6 +32,7 @@ import json
 import sys
 import tempfile
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -45,7 +47,9 @@ from glimpse.fixtures.scenes import FREE_BODY, make_scene
 from glimpse.ingest.blazepose import REGION_GROW, BlazePose
 from glimpse.ingest.config import IngestConfig, load_ingest_config
 from glimpse.ingest.crop import Region, region_from_alignment
-from glimpse.ingest.evaluate import HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, pck, score_people
+from glimpse.ingest.evaluate import (HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, mask_iou, pck,
+                                     score_people)
+from glimpse.ingest.mask_snap import snapped_masks
 from glimpse.ingest.sides import HIPS, SHOULDERS
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_pose
@@ -155,28 +159,45 @@ def reference_region(joints: np.ndarray) -> Region:
     return region_from_alignment(hips, hips + up * reach, REGION_GROW)
 
 
+class ModelReference(NamedTuple):
+    """What the models give one person shown alone (module docstring), over the frames where they are at least
+    half visible."""
+
+    pck: float       # PCK@PCK_FRACTION of the joints in view
+    mask_iou: float  # the segmentation, snapped to the frame's edges as the ingest's masks are, against the true
+                     # visible mask (0 in a frame where the model found nobody)
+
+
 def model_reference(fixture: Path, truth: dict[int, dict[str, TruePerson]], config: IngestConfig
-                    ) -> dict[str, float]:
-    """Pid -> PCK@PCK_FRACTION of the joints in view, over the frames where the person is at least half visible,
-    of the keypoints the ingest's steps give when the model is shown each person alone (module docstring). The
-    fixture's frames must be at the tracking size (its longer side at most ``track_max_side``)."""
+                    ) -> dict[str, ModelReference]:
+    """Pid -> what the ingest's steps give when the model is shown each person alone (module docstring), counted
+    over the same joints and frames as the ingest's scores. The fixture's frames must be at the tracking size (its
+    longer side at most ``track_max_side``)."""
     scene = load_scene(fixture)
     backgrounds = frame_files(fixture.with_name(fixture.name + ".groundtruth") / "background")
     tracker = Tracker(BlazePose(blazepose_folder(config), config.threads), config, None, pose=user_pose(config))
     people = sorted({pid for frame in truth.values() for pid in frame})
     out = {}
     for pid in people:
-        frames, keypoints, disputes = [], [], []
+        frames, keypoints, disputes, ious = [], [], [], []
         for fid in sorted(truth):
-            if pid not in truth[fid] or not truth[fid][pid].visible.any():
+            person = truth[fid].get(pid)
+            if person is None or not person.visible.any():
                 continue
             image, background = read_rgb(scene.frame_paths[fid]), read_rgb(backgrounds[fid])
-            for other, person in truth[fid].items():
+            for other, someone in truth[fid].items():
                 if other != pid:
-                    image[person.mask] = background[person.mask]
-            observation = tracker.observe(image, reference_region(truth[fid][pid].joints))
+                    image[someone.mask] = background[someone.mask]
+            observation = tracker.observe(image, reference_region(person.joints))
+            counted = person.visible.mean() >= HALF_VISIBLE
             if observation is None:
+                ious += [0.0] if counted else []
                 continue
+            if counted:
+                radius = round(config.mask_snap_radius * max(image.shape[:2]))
+                mask = (snapped_masks(image, [observation.mask], radius, config.mask_snap_eps)[0] if radius > 0
+                        else observation.mask)
+                ious.append(mask_iou(person.mask, mask))
             tracker.written_keypoints(image, observation)
             frames.append(fid)
             keypoints.append(recorded_keypoints(observation.keypoints, image.shape[:2], config.keypoint_min_confidence))
@@ -196,7 +217,8 @@ def model_reference(fixture: Path, truth: dict[int, dict[str, TruePerson]], conf
             right, seen = pck(person.joints, person.seen, found, PCK_FRACTION) if found is not None else (
                 0, int(person.seen.sum()))
             correct, counted = correct + right, counted + seen
-        out[pid] = correct / counted if counted else float("nan")
+        out[pid] = ModelReference(correct / counted if counted else float("nan"),
+                                  float(np.mean(ious)) if ious else float("nan"))
     return out
 
 
@@ -231,7 +253,7 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=None, help="keeps fixtures and videos between runs")
     parser.add_argument("--params", default="", help='ingest overrides, as make\'s PARAMS: "ingest.key=value ..."')
     parser.add_argument("--model-reference", action="store_true",
-                        help="also the PCK the keypoint model gives each person shown alone (module docstring)")
+                        help="also the PCK and mask IoU the models give each person shown alone (module docstring)")
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="glimpse-bench-ingest-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -242,18 +264,19 @@ def main() -> None:
     print("PCK over the joints in view (not behind anyone or anything, the person's own body included); "
           "'on silhouette' also counts joints behind the person's own body (a side-on person's far arm), and "
           "'hidden reported' is the share of those the ingest gave a confidence > 0; 'outside reported' the share of "
-          "the joints outside the image it gave one ('-': none outside); 'model shown alone': the PCK the keypoint "
-          "model gives the person shown alone (--model-reference; '-': not asked for)\n")
+          "the joints outside the image it gave one ('-': none outside); 'model shown alone': the PCK and the mask IoU "
+          "the models give the person shown alone (--model-reference; '-': not asked for)\n")
     print("| scenario | camera | person | frames (>= half visible) | recall | switches | PCK@0.1 skin | "
           "PCK@0.1 skin, model shown alone | PCK@0.1 joint centres | PCK@0.1 skin, on silhouette | hidden reported | "
-          "outside reported | mask IoU | found as | tracking fps | ms / frame / person |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "outside reported | mask IoU | mask IoU, model shown alone | found as | tracking fps | ms / frame / person |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         outside = "-" if np.isnan(r["outside_reported"]) else f"{r['outside_reported']:.2f}"
-        reference = "-" if r["reference"] is None else f"{r['reference']:.3f}"
+        reference, reference_iou = ("-", "-") if r["reference"] is None else (f"{r['reference'].pck:.3f}",
+                                                                             f"{r['reference'].mask_iou:.3f}")
         print(f"| {r['scenario']} | {r['camera']} | {r['person']} | {r['frames']} | {r['recall']:.3f} | {r['switches']} "
               f"| {r['pck']:.3f} | {reference} | {r['pck_joints']:.3f} | {r['pck_silhouette']:.3f} "
-              f"| {r['hidden_reported']:.2f} | {outside} | {r['mask_iou']:.3f} | {r['ids']} | {r['fps']:.2f} "
+              f"| {r['hidden_reported']:.2f} | {outside} | {r['mask_iou']:.3f} | {reference_iou} | {r['ids']} | {r['fps']:.2f} "
               f"| {r['ms_per_person']:.0f} |")
 
 

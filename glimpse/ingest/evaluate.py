@@ -65,7 +65,8 @@ class PersonScore:
     ids: tuple[str, ...]  # found ids matched to the person, in order of first match
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
+def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two [H, W] bool masks; 0 when both are empty."""
     union = np.logical_or(a, b).sum()
     return float(np.logical_and(a, b).sum() / union) if union else 0.0
 
@@ -75,7 +76,7 @@ def match_frame(truth: dict[str, TruePerson], found: dict[str, FoundPerson]) -> 
     true_ids, found_ids = list(truth), list(found)
     if not true_ids or not found_ids:
         return {}
-    iou = np.array([[_iou(truth[t].mask, found[f].mask) for f in found_ids] for t in true_ids])
+    iou = np.array([[mask_iou(truth[t].mask, found[f].mask) for f in found_ids] for t in true_ids])
     rows, cols = linear_sum_assignment(-iou)
     return {true_ids[r]: (found_ids[c], float(iou[r, c])) for r, c in zip(rows, cols) if iou[r, c] >= MATCH_MIN_IOU}
 
