@@ -12,7 +12,7 @@ import pytest
 
 from glimpse.ingest.appearance import appearance_distance
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
-from glimpse.ingest.claims import return_refound
+from glimpse.ingest.claims import drop_lookalikes, return_refound
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
 from glimpse.ingest.observation import Observation, Track, observed_skeleton_distance
@@ -103,6 +103,24 @@ def test_whom_a_lost_track_finds_in_its_old_region_goes_to_the_track_they_look_l
     before = dict(followed)
     return_refound(followed, [lost, own], tracker.config.track_reclaim_margin)
     assert followed == ({1: person} if case == "returned" else before)
+
+
+@pytest.mark.parametrize("case", ["dropped", "other region", "no better", "its own look"])
+def test_a_find_that_looks_like_another_track_is_not_kept(tracker: Tracker, case: str) -> None:
+    """A track's region slid half onto someone else: what it finds looks 0.41 from it (within the follow distance)
+    but 0.28 from another live track (missing this frame: its person is hidden), whose predicted region lies over
+    the find. The find is dropped (the track will look behind the people found), and kept when the other track's
+    region lies elsewhere, when the find looks no better like it than the margin, or when it looks like the track's
+    own person."""
+    track = _track(0, 100.0, 0.3)
+    other = _track(1, 110.0 if case != "other region" else 300.0, 1.0, missing=1)
+    if case == "no better":
+        other.look = _look(0.3)
+    find = _observation(106.0, 0.3 if case == "its own look" else 0.85)
+    assert appearance_distance(track.look, find.look) <= tracker.config.track_follow_max_distance
+    followed = {0: find}
+    drop_lookalikes(followed, [track, other], tracker.config.track_reclaim_margin)
+    assert followed == ({} if case == "dropped" else {0: find})
 
 
 def test_two_finds_of_two_people_are_both_kept_with_one_look_each(tracker: Tracker) -> None:

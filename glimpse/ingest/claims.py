@@ -51,3 +51,24 @@ def reclaim(fresh: list[Observation], followed: dict[int, Observation], tracks: 
         if best is not None:
             followed[best] = observation
             fresh[:] = [other for other in fresh if other is not observation]
+
+
+
+def drop_lookalikes(followed: dict[int, Observation], live: list[Track], margin: float) -> None:
+    """What a track found in its region is not its person when they look like another live track better, by more
+    than ``margin`` (appearance distance), and that track's predicted region overlaps them: the region slid onto,
+    or half onto, the person another track follows or lost (two people crossing, one hidden behind the other).
+    Kept, the fit moves the track's running appearance towards the other person's until the tracker can no longer
+    tell them apart. The track counts as unseen here and looks behind the people found (the tracker's step 2);
+    its find is only dropped, not given to the other track. ``followed``: track index -> what it found this frame;
+    ``live``: the tracks that looked."""
+    for track in [t for t in live if t.index in followed]:
+        observation = followed[track.index]
+        own = appearance_distance(track.look, observation.look)
+        for other in live:
+            if other.index == track.index or not comparable(other.look, observation.look):
+                continue
+            overlaps = box_iou(other.predicted_region().box()[None], observation.box[None])[0, 0] > 0
+            if overlaps and appearance_distance(other.look, observation.look) + margin < own:
+                del followed[track.index]
+                break

@@ -47,6 +47,7 @@ class IngestConfig:
     track_reid_max_distance: float
     track_follow_max_distance: float
     track_reclaim_margin: float
+    track_drop_lookalikes: bool
     track_backfill_frames: int
     track_backfill_keypoints_max_overlap: float
     track_min_frames: int

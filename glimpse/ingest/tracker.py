@@ -6,7 +6,8 @@ Per frame (BlazePose's own scheme, extended to several people):
    track's velocity); the landmark model's presence score says whether the person is still there, and
    whoever is there must look like the track (``track_follow_max_distance``), else the region slid onto
    someone else. Whom a track that had lost its person finds so goes to a track that found nobody, whose region
-   lies over them too, when they look like it clearly better (``track_reclaim_margin``).
+   lies over them too, when they look like it clearly better (``track_reclaim_margin``); a find that looks clearly
+   more like another live track whose region lies over it is dropped, and the track looks behind (step 2).
 2. **Resolve.** Two tracks that found one person (their body points coincide: a region that slid onto
    someone else at a crossing) keep the one whose appearance matches its track best; the other *looks
    behind*: its region again with the people already found painted over by the background plate (where the
@@ -44,7 +45,7 @@ from scipy.optimize import linear_sum_assignment
 
 from glimpse.ingest.appearance import appearance, appearance_distance, blend
 from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, BlazePose, PoseLandmarks, box_iou
-from glimpse.ingest.claims import reclaim, return_refound
+from glimpse.ingest.claims import drop_lookalikes, reclaim, return_refound
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, outside_image, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
@@ -134,6 +135,8 @@ class Tracker:
             if looks_like(track, observation, config.track_follow_max_distance):
                 followed[track.index] = observation
         return_refound(followed, live, config.track_reclaim_margin)
+        if config.track_drop_lookalikes:
+            drop_lookalikes(followed, live, config.track_reclaim_margin)
         behind = set(self._resolve_duplicates(followed)) | self._hidden_by_others(live, followed)
         self._look_behind_all(image, followed, [t for t in live if t.index in behind])
         fresh = self._find_new(image, list(followed.values()))
