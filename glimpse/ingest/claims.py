@@ -1,6 +1,6 @@
 """Who gets a person two tracks could claim, by appearance and by where the tracks' regions lie: the rules of the
 tracker's steps 1 and 4 (glimpse.ingest.tracker) that move an observation from one track, or from the new people,
-to another. Each changes its dicts and lists in place."""
+to another, or take it from a track that another claims better. Each changes its dicts and lists in place."""
 
 from __future__ import annotations
 
@@ -51,7 +51,6 @@ def reclaim(fresh: list[Observation], followed: dict[int, Observation], tracks: 
         if best is not None:
             followed[best] = observation
             fresh[:] = [other for other in fresh if other is not observation]
-
 
 
 def drop_lookalikes(followed: dict[int, Observation], live: list[Track], margin: float) -> None:
