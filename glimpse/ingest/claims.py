@@ -9,6 +9,11 @@ from glimpse.ingest.blazepose import box_iou
 from glimpse.ingest.observation import Observation, Track
 
 
+def _expected_over(track: Track, observation: Observation) -> bool:
+    """Whether the region where ``track`` expects its person this frame overlaps the observation's box."""
+    return box_iou(track.predicted_region().box()[None], observation.box[None])[0, 0] > 0
+
+
 def return_refound(followed: dict[int, Observation], live: list[Track], margin: float) -> None:
     """Whom a track missing until this frame found in its region (a region left where its person was last seen,
     which someone else may have walked into) goes to a track seen in the last frame that found nobody, whose
@@ -20,8 +25,7 @@ def return_refound(followed: dict[int, Observation], live: list[Track], margin: 
         observation = followed[track.index]
         best, best_gain = None, margin
         for other in empty:
-            overlaps = box_iou(other.predicted_region().box()[None], observation.box[None])[0, 0] > 0
-            if not overlaps or not comparable(other.look, observation.look):
+            if not _expected_over(other, observation) or not comparable(other.look, observation.look):
                 continue
             gain = appearance_distance(track.look, observation.look) - appearance_distance(other.look,
                                                                                             observation.look)
@@ -67,7 +71,6 @@ def drop_lookalikes(followed: dict[int, Observation], live: list[Track], margin:
         for other in live:
             if other.index == track.index or not comparable(other.look, observation.look):
                 continue
-            overlaps = box_iou(other.predicted_region().box()[None], observation.box[None])[0, 0] > 0
-            if overlaps and appearance_distance(other.look, observation.look) + margin < own:
+            if _expected_over(other, observation) and appearance_distance(other.look, observation.look) + margin < own:
                 del followed[track.index]
                 break
