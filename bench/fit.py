@@ -17,7 +17,9 @@ each alone); a second table per size gives, per
 scene, the 2D fits' error with no alignment, up to one scale for the whole scene about the camera (the one
 thing 2D keypoints cannot tell: glimpse.fit.evaluate.scene_scale_errors), the error of pelvis-to-pelvis
 distances, how often the depth order of two people agrees with the truth (and, where it does not, the largest
-true depth gap among those pair-frames), and fitting seconds per person per 100 frames.
+true depth gap among those pair-frames), and fitting seconds per person per 100 frames. A third table gives how the
+fitted bodies move against the true ones (glimpse.fit.evaluate.motion_errors): the joints' acceleration error, their
+jitter (mean jerk) and the feet's speed where the true foot is planted (foot skate), fitted and true.
 
 Then "scenes not seen": `demo` and `crowd` with another seed (other looks and body shapes),
 2D keypoints only (mode auto), each person's pose prior fitted to the built-in motions other
@@ -47,7 +49,7 @@ from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import command_params, config_from_mapping  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import joint_errors, placement_errors, scene_scale_errors  # noqa: E402
+from glimpse.fit.evaluate import joint_errors, motion_errors, placement_errors, scene_scale_errors  # noqa: E402
 from glimpse.fit.floor_fit import place_on_common_floor  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
 from glimpse.fixtures.mesh_render import Mesh, render_meshes  # noqa: E402
@@ -180,9 +182,11 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
                 for fit in fits:
                     true = truths[fit.pid]
                     errors = joint_errors(model, fit.params, true)
+                    motion = motion_errors(model, fit.params, true, scene.fps)
                     rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
                                  "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
-                                 "floor": _floor_label(floor), **placement, **errors, "scene_scale": scene_scale,
+                                 "floor": _floor_label(floor), **placement, **errors, **motion,
+                                 "scene_scale": scene_scale,
                                  "scene_scaled_m": scene_scaled[fit.pid],
                                  "stature_m": standing_height_m(model, fit.params.betas, fit.params.scale),
                                  "true_stature_m": standing_height_m(model, true["betas"], true.get("scale", 1.0))})
@@ -302,6 +306,30 @@ def print_placement_table(size: str, rows: list[dict], conditions: tuple[str, ..
                   f"{order_cell(order, miss)} | {sel[0]['seconds_per_100_frames']:.1f} |")
 
 
+def print_motion_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS,
+                       modes: tuple[str, ...] = MODES) -> None:
+    """Per scene, mode and condition, the people's mean of glimpse.fit.evaluate.motion_errors (foot skate over the
+    people with a planted foot in some frame: '-' where nobody has one)."""
+    print(f"\n### {size} fixtures: how the fitted bodies move (consecutive fitted frames; fitted / true)\n")
+    print("| scene | mode | condition | acceleration error, m/s^2 | jitter (mean jerk), m/s^3 | "
+          "foot skate on planted frames, cm/s | planted foot-frame pairs |")
+    print("|---|---|---|---|---|---|---|")
+    for scenario in dict.fromkeys(r["scenario"] for r in rows):
+        for mode in modes:
+            for condition in conditions:
+                sel = [r for r in rows if r["scenario"] == scenario and r["condition"] == condition
+                       and r["mode"] == mode]
+                if not sel:
+                    continue
+                planted = [r for r in sel if r["contact_pairs"]]  # people with a planted foot somewhere
+                skate = (f"{100 * np.mean([r['foot_skate_m_s'] for r in planted]):.1f} / "
+                         f"{100 * np.mean([r['true_foot_skate_m_s'] for r in planted]):.1f}" if planted else "-")
+                print(f"| {scenario} | {mode} | {condition} | {np.mean([r['accel_error_m_s2'] for r in sel]):.2f} | "
+                      f"{np.mean([r['jitter_m_s3'] for r in sel]):.1f} / "
+                      f"{np.mean([r['true_jitter_m_s3'] for r in sel]):.1f} | {skate} | "
+                      f"{sum(r['contact_pairs'] for r in sel)} |")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also the full-size scenes (minutes)")
@@ -332,6 +360,7 @@ def main() -> int:
                             args.params, tuple(args.modes), args.state)
             print_table(size, rows, tuple(args.conditions), tuple(args.modes))
             print_placement_table(size, rows, tuple(args.conditions))
+            print_motion_table(size, rows, tuple(args.conditions), tuple(args.modes))
             if not args.no_unseen:
                 print_unseen_table(size, evaluate_unseen(size, Path(tmp), args.ground, args.params))
             if args.per_person:

@@ -17,8 +17,8 @@ from glimpse.body.params import BodyParams
 from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig
-from glimpse.fit.evaluate import (body_joints, joint_errors, moved_onto_truth, placement_errors, scaled_about_cameras,
-                                  scene_scale_errors)
+from glimpse.fit.evaluate import (body_joints, joint_errors, motion_errors, moved_onto_truth, placement_errors,
+                                  scaled_about_cameras, scene_scale_errors)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
@@ -321,6 +321,33 @@ def test_a_body_scaled_about_the_cameras_projects_to_the_same_pixels(model):
     scale, _ = scene_scale_errors(model, {"p0": scaled}, {"p0": _truth(truth)},
                                   {int(f): c for f, c in zip(truth.frame_ids, centres)})
     assert scale == pytest.approx(1 / 1.03, abs=1e-3)
+
+
+def test_motion_errors_of_a_jittering_fit_against_a_standing_truth(model):
+    """motion_errors against closed forms: the truth stands still (every foot planted, no acceleration or jerk);
+    the fit is the truth shifted by +-e along x in alternate frames, so each joint's second difference is 4e, its
+    third 8e and each foot moves 2e between frames (times fps, fps^2, fps^3); frame 6 is missing, so only the runs
+    0-5 and 7-10 count."""
+    frames, fps, e = 11, 8.0, 0.01
+    ids = np.delete(np.arange(frames), 6)
+    standing = BodyParams(ids, np.zeros(10), np.zeros((10, 3)), np.zeros((10, 69)), np.tile([0.0, 0.9, 3.0], (10, 1)),
+                          1.0, "free", np.zeros(10, bool))
+    sign = np.where(ids % 2 == 0, 1.0, -1.0)
+    jittering = replace(standing, transl=standing.transl + e * sign[:, None] * [1.0, 0.0, 0.0])
+    truth = _truth(standing)
+    still = motion_errors(model, standing, truth, fps)
+    for key in ("accel_error_m_s2", "jitter_m_s3", "foot_skate_m_s"):
+        assert still[key] == pytest.approx(0.0, abs=1e-9)
+    assert still["contact_pairs"] == 2 * (5 + 3)  # two feet over the pairs of frames 0-5 and 7-10
+    moved = motion_errors(model, jittering, truth, fps)
+    assert moved["accel_error_m_s2"] == pytest.approx(4 * e * fps ** 2)
+    assert moved["jitter_m_s3"] == pytest.approx(8 * e * fps ** 3)
+    assert moved["true_jitter_m_s3"] == pytest.approx(0.0, abs=1e-9)
+    assert moved["foot_skate_m_s"] == pytest.approx(2 * e * fps)
+    assert moved["true_foot_skate_m_s"] == pytest.approx(0.0, abs=1e-9)
+    # the truth walking: the swing foot is not planted, so fewer pairs count
+    walking = _known_person(model, 10)
+    assert motion_errors(model, walking, _truth(walking), 10.0)["contact_pairs"] < 2 * 9
 
 
 def test_the_masks_put_in_front_whoever_owns_the_overlap_of_two_skeletons():

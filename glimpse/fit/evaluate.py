@@ -9,12 +9,14 @@ error over the 24 body joints of the fitted (not interpolated) frames, three way
 For a scene's people together, ``scene_scale_errors`` removes only what no single view can tell: the whole
 scene scaled about the camera by one factor (placement_errors: how people stand relative to each other), and
 ``front_by_masks`` reads who hides whom from the people's masks where their skeletons overlap in the image, to
-compare with the fitted and the true depth order.
+compare with the fitted and the true depth order. ``motion_errors`` says how the fitted bodies move against the
+true ones: acceleration error, jitter, and foot skate where a true foot is planted.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
+from math import comb
 
 import cv2
 import numpy as np
@@ -29,6 +31,8 @@ from glimpse.cameras.align import Similarity, umeyama
 SCENE_SCALE_BOUNDS = (0.25, 4.0)  # the common factor searched: a scene fitted 4 times too near or far is not a fit
 SCENE_SCALE_TOLERANCE = 1e-9  # the factor to this (relative to 1: far below any error that matters)
 PELVIS, NECK = 0, 12  # body joints: a projected torso's length, which sets how wide a skeleton is drawn
+FEET = (10, 11)  # body joints left_foot, right_foot (the ball of the foot)
+CONTACT_SPEED_M_S = 0.2  # a true foot slower than this between two consecutive frames is planted (a stance foot)
 
 
 def body_joints(model: BodyModel, betas: np.ndarray, global_orient: np.ndarray, body_pose: np.ndarray,
@@ -60,6 +64,47 @@ def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
             "sequence_aligned_m": float(np.linalg.norm(whole.apply(fit.reshape(-1, 3)) - true.reshape(-1, 3),
                                                        axis=1).mean()),
             "frame_aligned_m": float(np.mean(per_frame))}
+
+
+def motion_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray], fps: float
+                  ) -> dict[str, float]:
+    """How the fitted motion moves, against the true one (truth as in ``joint_errors``), over runs of consecutive
+    fitted (not interpolated) frames, derivatives by finite differences at the scene's ``fps``, in world units
+    (metres in a metric frame) and seconds:
+
+    - ``accel_error_m_s2``: mean | a_fit - a_true | of the 24 joints' accelerations (as video pose papers report
+      it, but per second squared rather than per frame squared, so that 8 and 33 fps scenes compare);
+    - ``jitter_m_s3`` and ``true_jitter_m_s3``: the mean magnitude of the joints' jerk, fitted and true;
+    - ``foot_skate_m_s`` and ``true_foot_skate_m_s``: the mean speed of the fitted and the true feet (FEET) between
+      consecutive frames where the true foot is planted (slower than CONTACT_SPEED_M_S), over ``contact_pairs``
+      such foot-frame pairs. nan where the sequence has no such triple, quadruple or pair."""
+    keep = ~fitted.interpolated
+    ids = fitted.frame_ids[keep]
+    fit = body_joints(model, fitted.betas, fitted.global_orient[keep], fitted.body_pose[keep], fitted.transl[keep],
+                      fitted.scale)
+    true = true_joints(model, fitted, truth)
+
+    def differences(order: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``order``-th differences (times fps^order) of fitted and true joints over windows of consecutive
+        frames: each [N, 24, 3]."""
+        starts = [t for t in range(len(ids) - order) if ids[t + order] - ids[t] == order]
+        if not starts:
+            return np.zeros((0, *fit.shape[1:])), np.zeros((0, *fit.shape[1:]))
+        window = np.array(starts)[:, None] + np.arange(order + 1)
+        weights = np.array([(-1) ** (order - k) * comb(order, k) for k in range(order + 1)], float)
+        return (np.einsum("k,nkjc->njc", weights, fit[window]) * fps ** order,
+                np.einsum("k,nkjc->njc", weights, true[window]) * fps ** order)
+
+    mean_norm = lambda x: float(np.linalg.norm(x, axis=-1).mean()) if x.size else float("nan")
+    accel_fit, accel_true = differences(2)
+    jerk_fit, jerk_true = differences(3)
+    speed_fit, speed_true = (np.linalg.norm(v[:, FEET], axis=-1) for v in differences(1))
+    planted = speed_true < CONTACT_SPEED_M_S
+    return {"accel_error_m_s2": mean_norm(accel_fit - accel_true),
+            "jitter_m_s3": mean_norm(jerk_fit), "true_jitter_m_s3": mean_norm(jerk_true),
+            "foot_skate_m_s": float(speed_fit[planted].mean()) if planted.any() else float("nan"),
+            "true_foot_skate_m_s": float(speed_true[planted].mean()) if planted.any() else float("nan"),
+            "contact_pairs": int(planted.sum())}
 
 
 def moved_onto_truth(model: BodyModel, fitted: BodyParams,
