@@ -11,11 +11,13 @@ keypoints and their size (3d-size: relative3d_size model), and with them up to o
 (3d-fitted).
 Per scene: mean per-joint error with no alignment, up to one scale for the whole scene about the camera (what no
 single view tells: glimpse.fit.evaluate.scene_scale_errors) and after one similarity per person's sequence, pelvis
-distance errors, depth order agreement (glimpse.fit.evaluate), and how the metric 3D keypoints themselves
-compare with the true body's (turned onto each frame's viewing ray as stage 02 does); then the common floor
-against the true one (glimpse.fit.evaluate.floor_errors: its tilt, split into the camera's pitch and roll, and
-the camera's height above it); and who hides whom where two people's skeletons overlap in the image, as their
-ingested masks say it (glimpse.fit.evaluate.front_by_masks), against the fitted and the true depth order.
+distance errors, depth order agreement (glimpse.fit.evaluate), how the metric 3D keypoints themselves
+compare with the true body's (turned onto each frame's viewing ray as stage 02 does), and how the fitted body
+moves (glimpse.fit.evaluate.motion_errors: jitter, and foot skate where the true foot is planted; '-' where it
+never is); then the common floor against the true one (glimpse.fit.evaluate.floor_errors: its tilt, split
+into the camera's pitch and roll, and the camera's height above it); and who hides whom where two people's
+skeletons overlap in the image, as their ingested masks say it (glimpse.fit.evaluate.front_by_masks), against the
+fitted and the true depth order.
 
     python bench/fit_ingested.py [--scenarios demo,adult_child] [--seed 0] [--work DIR]
                                  [--variants 2d,3d-size,3d-fitted] [--params "02_smpl_fit.key=value ..."]
@@ -51,6 +53,7 @@ from glimpse.fit.evaluate import (  # noqa: E402
     floor_errors,
     front_by_masks,
     joint_errors,
+    motion_errors,
     placement_errors,
     scene_scale_errors,
     true_joints,
@@ -202,7 +205,8 @@ def run(scenario: str, seed: int, work: Path, model: BodyModel, variants: list[s
         for pid, fit in sorted(fitted.items()):
             rows.append({"scenario": scenario, "person": pid, "variant": variant, "floor": floor["applied"],
                          "seconds_per_100_frames": 100 * seconds / frames, **placement, **metric,
-                         **joint_errors(model, fit, truths[pid]), "floor_errors": on_floor,
+                         **joint_errors(model, fit, truths[pid]), **motion_errors(model, fit, truths[pid], scene.fps),
+                         "floor_errors": on_floor,
                          "scene_scale": scene_scale, "scene_scaled_m": scene_scaled[pid], "mask_order": order})
     return rows
 
@@ -231,17 +235,20 @@ def main() -> None:
     print(f"\nStage 02 on ingested fixture videos ({SIZE}, seed {args.seed}, the fixtures' cameras); cm\n")
     print("| scene | person | metric 3D | floor | as fitted | up to one scene scale (the scale) | person-aligned | "
           "pelvis distances | depth order (largest true gap missed) | metric 3D keypoints' error | their size / true | "
-          "s per person per 100 frames |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "jitter, m/s^3 (true) | foot skate, cm/s (true) | s per person per 100 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         distance = r["pelvis_distance_error_m"]
+        skate = (f"{100 * r['foot_skate_m_s']:.1f} ({100 * r['true_foot_skate_m_s']:.1f})" if r["contact_pairs"]
+                 else "-")
         print(f"| {r['scenario']} | {r['person']} | {r['variant']} | "
               f"{'yes' if r['floor'] else 'no'} | {100 * r['mpjpe_m']:.1f} | "
               f"{100 * r['scene_scaled_m']:.1f} ({r['scene_scale']:.3f}) | {100 * r['sequence_aligned_m']:.1f} | "
               f"{'-' if np.isnan(distance) else f'{100 * distance:.1f}'} | "
               f"{order_cell(r['depth_order_agreement'], r['depth_order_largest_miss_m'])} | "
               f"{100 * r['relative3d_error_m']:.1f} | "
-              f"{r['relative3d_size_ratio']:.2f} | {r['seconds_per_100_frames']:.0f} |")
+              f"{r['relative3d_size_ratio']:.2f} | {r['jitter_m_s3']:.0f} ({r['true_jitter_m_s3']:.0f}) | "
+              f"{skate} | {r['seconds_per_100_frames']:.0f} |")
 
     print("\nThe common floor against the true one (degrees; the camera's height above it, cm; pitch: the fitted up "
           "leaning towards the camera's view)\n")

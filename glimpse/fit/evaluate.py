@@ -67,10 +67,10 @@ def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
 
 
 def motion_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray], fps: float
-                  ) -> dict[str, float]:
-    """How the fitted motion moves, against the true one (truth as in ``joint_errors``), over runs of consecutive
+                  ) -> dict[str, float | int]:
+    """How the fitted body moves, against the true one (truth as in ``joint_errors``), over runs of consecutive
     fitted (not interpolated) frames, derivatives by finite differences at the scene's ``fps``, in world units
-    (metres in a metric frame) and seconds:
+    and seconds (a metric world: CONTACT_SPEED_M_S is in metres per second):
 
     - ``accel_error_m_s2``: mean | a_fit - a_true | of the 24 joints' accelerations (as video pose papers report
       it, but per second squared rather than per frame squared, so that 8 and 33 fps scenes compare);
