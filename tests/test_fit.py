@@ -326,8 +326,8 @@ def test_a_body_scaled_about_the_cameras_projects_to_the_same_pixels(model):
 def test_motion_errors_of_a_jittering_fit_against_a_standing_truth(model):
     """motion_errors against closed forms: the truth stands still (every foot planted, no acceleration or jerk);
     the fit is the truth shifted by +-e along x in alternate frames, so each joint's second difference is 4e, its
-    third 8e and each foot moves 2e between frames (times fps, fps^2, fps^3); frame 6 is missing, so only the runs
-    0-5 and 7-10 count."""
+    third 8e and each foot moves 2e between frames (times fps^2, fps^3 and fps); frame 6 is missing, so only the
+    runs 0-5 and 7-10 count."""
     frames, fps, e = 11, 8.0, 0.01
     ids = np.delete(np.arange(frames), 6)
     standing = BodyParams(ids, np.zeros(10), np.zeros((10, 3)), np.zeros((10, 69)), np.tile([0.0, 0.9, 3.0], (10, 1)),
@@ -345,7 +345,7 @@ def test_motion_errors_of_a_jittering_fit_against_a_standing_truth(model):
     assert moved["true_jitter_m_s3"] == pytest.approx(0.0, abs=1e-9)
     assert moved["foot_skate_m_s"] == pytest.approx(2 * e * fps)
     assert moved["true_foot_skate_m_s"] == pytest.approx(0.0, abs=1e-9)
-    # the truth walking: the swing foot is not planted, so fewer pairs count
+    # the truth walking (the built-in walk, whose feet slide: docs/fitting.md): fewer planted pairs
     walking = _known_person(model, 10)
     assert motion_errors(model, walking, _truth(walking), 10.0)["contact_pairs"] < 2 * 9
 
