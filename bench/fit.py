@@ -5,8 +5,9 @@ three conditions, then compared with the true body (glimpse.fit.evaluate, 24 joi
   clean:     exact keypoints (the fixture's confidences: occluded or 10% dropped ones unused)
   noisy:     the fixture's keypoints (3D: 1.5 cm noise; 2D: 1.5 px at 320 px wide), 10% dropped
   noisy-30%: the same with further keypoints dropped at random, 30% dropped in all
-Prints one Markdown table per size: mean per-joint error as fitted and after alignment, and
-fitting seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
+Prints one Markdown table per size: mean per-joint error as fitted and after alignment, how far the fitted body's
+shape is from the true one (rest-pose surface, size aligned: glimpse.fit.evaluate.shape_errors), and fitting
+seconds (2 threads). `--full` adds the full-size (320x240, 100 frames) scenes; `--seed` draws
 the fixtures with another seed; `--params` overrides parameters as make's PARAMS does, to compare settings;
 `--state p0` gives stage 02 that person's true height, as a user who knows it would state it; `--state shapes`
 every person's true body shape (02_smpl_fit.person_shapes).
@@ -49,7 +50,8 @@ from glimpse.body.model import BodyModel  # noqa: E402
 from glimpse.body.models import BodyModels  # noqa: E402
 from glimpse.config import command_params, config_from_mapping  # noqa: E402
 from glimpse.fit.config import FitConfig  # noqa: E402
-from glimpse.fit.evaluate import joint_errors, motion_errors, placement_errors, scene_scale_errors  # noqa: E402
+from glimpse.fit.evaluate import (joint_errors, motion_errors, placement_errors, scene_scale_errors,  # noqa: E402
+                                  shape_errors)
 from glimpse.fit.floor_fit import place_on_common_floor  # noqa: E402
 from glimpse.fit.stage import Fitter  # noqa: E402
 from glimpse.fixtures.mesh_render import Mesh, render_meshes  # noqa: E402
@@ -183,9 +185,10 @@ def evaluate(size: str, root: Path, scenarios: tuple[str, ...] = SCENARIOS,
                     true = truths[fit.pid]
                     errors = joint_errors(model, fit.params, true)
                     motion = motion_errors(model, fit.params, true, scene.fps)
+                    shape = shape_errors(model, fit.params, true)
                     rows.append({"scenario": scenario, "person": fit.pid, "mode": mode, "condition": condition,
                                  "seconds": fit.report["seconds"], "seconds_per_100_frames": 100 * seconds / frames,
-                                 "floor": _floor_label(floor), **placement, **errors, **motion,
+                                 "floor": _floor_label(floor), **placement, **errors, **motion, **shape,
                                  "scene_scale": scene_scale,
                                  "scene_scaled_m": scene_scaled[fit.pid],
                                  "stature_m": standing_height_m(model, fit.params.betas, fit.params.scale),
@@ -268,8 +271,9 @@ def print_unseen_table(size: str, rows: list[dict]) -> None:
 def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDITIONS,
                 modes: tuple[str, ...] = MODES) -> None:
     print(f"\n### {size} fixtures: mean per-joint error, cm (24 joints, fitted frames)\n")
-    print("| mode | condition | people | as fitted | sequence-aligned | frame-aligned (PA) | worst person, seq.-aligned | s per person |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| mode | condition | people | as fitted | sequence-aligned | frame-aligned (PA) | "
+          "worst person, seq.-aligned | rest-pose surface, size-aligned | s per person |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for mode in modes:
         for condition in conditions:
             sel = [r for r in rows if r["mode"] == mode and r["condition"] == condition]
@@ -278,6 +282,7 @@ def print_table(size: str, rows: list[dict], conditions: tuple[str, ...] = CONDI
                   f"{100 * np.mean([r['sequence_aligned_m'] for r in sel]):.2f} | "
                   f"{100 * np.mean([r['frame_aligned_m'] for r in sel]):.2f} | "
                   f"{100 * worst['sequence_aligned_m']:.2f} ({worst['scenario']} {worst['person']}) | "
+                  f"{100 * np.mean([r['surface_size_aligned_m'] for r in sel]):.2f} | "
                   f"{np.mean([r['seconds'] for r in sel]):.1f} |")
 
 
@@ -369,7 +374,9 @@ def main() -> int:
                           f"{100 * r['mpjpe_m']:.1f} / {100 * r['scene_scaled_m']:.1f} / "
                           f"{100 * r['sequence_aligned_m']:.1f} / {100 * r['frame_aligned_m']:.1f} cm (as fitted / "
                           f"up to one scene scale / sequence-aligned / frame-aligned), standing {r['stature_m']:.3f} m "
-                          f"(true {r['true_stature_m']:.3f}), {r['seconds']:.1f} s")
+                          f"(true {r['true_stature_m']:.3f}), rest-pose surface {100 * r['surface_m']:.1f} / "
+                          f"{100 * r['surface_size_aligned_m']:.1f} cm (as fitted / size-aligned), "
+                          f"{r['seconds']:.1f} s")
     return 0
 
 

@@ -18,7 +18,7 @@ from glimpse.config import config_from_mapping, load_pipeline_yaml
 from glimpse.errors import ConfigError, GlimpseError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import (body_joints, joint_errors, motion_errors, moved_onto_truth, placement_errors,
-                                  scaled_about_cameras, scene_scale_errors)
+                                  scaled_about_cameras, scene_scale_errors, shape_errors)
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import (FitSchedule, cheapest_path, choose_turns, fit_track, hypothesis_change_cost,
                                       initial_state_2d, initial_state_3d, motion_stride, unseen_limb_rotations)
@@ -348,6 +348,20 @@ def test_motion_errors_of_a_jittering_fit_against_a_standing_truth(model):
     # the truth walking (the built-in walk, whose feet slide: docs/fitting.md): fewer planted pairs
     walking = _known_person(model, 10)
     assert motion_errors(model, walking, _truth(walking), 10.0)["contact_pairs"] < 2 * 9
+
+
+def test_shape_errors_compare_rest_bodies_and_remove_only_their_size(model):
+    """The same shape at 1.1 times the size is 10% of each vertex's distance from the root off as fitted and 0
+    size aligned; another shape stays off either way; the pose never counts."""
+    truth = _known_person(model, 3)
+    rest = model(torch.as_tensor(truth.betas), torch.zeros(1, 3, dtype=F64), torch.zeros(1, 69, dtype=F64))
+    reach = float(torch.linalg.norm(rest.vertices[0] - rest.joints[0, 0], dim=1).mean())
+    larger = replace(truth, scale=1.1, body_pose=np.zeros_like(truth.body_pose))
+    errors = shape_errors(model, larger, _truth(truth))
+    assert errors["surface_m"] == pytest.approx(0.1 * reach, rel=1e-9)
+    assert errors["surface_size_aligned_m"] < 1e-12
+    other = shape_errors(model, replace(truth, betas=np.zeros(10)), _truth(truth))
+    assert other["surface_size_aligned_m"] > 0.005 and other["surface_m"] >= other["surface_size_aligned_m"]
 
 
 def test_the_masks_put_in_front_whoever_owns_the_overlap_of_two_skeletons():

@@ -83,13 +83,18 @@ def test_keypoints3d_fit_is_within_3_cm_of_the_true_bodies(small_demo, model):
 
 def test_keypoints2d_fit_is_within_10_cm_after_alignment_and_writes_the_overlay(small_demo, model):
     scene, out = small_demo
-    result = run("02_smpl_fit", scene, out, f"02_smpl_fit.mode=keypoints2d {FAST}")
+    result = run("02_smpl_fit", scene, out, f"02_smpl_fit.mode=keypoints2d 02_smpl_fit.silhouette.mode=auto {FAST}")
     for pid in ("p0", "p1"):
         params = read_body_params(result / "humans" / pid / "body.npz")
         errors = joint_errors(model, params, _truth(scene, pid))
         assert errors["sequence_aligned_m"] < 0.10, (pid, errors)
         report = read_json(result / "humans" / pid / "fit_report.json")
         assert report["keypoints2d_residual_px"]["mean"] < 1.5
+        # the fixture gives masks, and the term is asked for: the full and floor stages measure the body's outline
+        # against them; the global stage and the per-frame pose hypotheses do not
+        stages = {stage["stage"]: "silhouette" in stage["energy"] for stage in report["stages"]}
+        assert stages["global"] is False and stages["full_3"] is True, stages
+        assert all(used == (name.startswith("full") or name == "floor") for name, used in stages.items()), stages
     # p0 enters the picture cut by the border: its first frames lack keypoints, so it has no body there
     p0 = read_json(result / "humans" / "p0" / "fit_report.json")
     assert p0["absent_frames"][:1] == ["000000"] and "000000" not in p0["per_frame"]
@@ -216,6 +221,7 @@ def test_metric_3d_keypoints_beside_the_2d_ones_join_the_fit(tmp_path, model):
         for pid in ("p0", "p1"):
             report = read_json(result / "humans" / pid / "fit_report.json")
             assert all(("metric_3d" in stage["energy"]) == (used == "true") for stage in report["stages"])
+            assert not any("silhouette" in stage["energy"] for stage in report["stages"])  # off by default
             params = read_body_params(result / "humans" / pid / "body.npz")
             errors[used, pid] = joint_errors(model, params, _truth(scene, pid))["frame_aligned_m"]
     for pid in ("p0", "p1"):  # exact metric keypoints tell the pose's depth, which the pixels leave open

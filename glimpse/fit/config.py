@@ -81,6 +81,31 @@ class GroundConfig:
 
 
 @dataclass(frozen=True)
+class SilhouetteConfig:
+    mode: Literal["auto", "off"]
+    weight: float
+    noise_m: float
+    robust_m: float
+    clothing_m: float
+    rate_hz: float
+    surface_points: int
+    linked_keypoints: int
+    outline_pixels: int
+    max_side_px: int
+
+    def __post_init__(self) -> None:
+        for name in ("weight", "noise_m", "robust_m", "rate_hz"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"02_smpl_fit.silhouette.{name} must be above 0, found {getattr(self, name)} "
+                                  f"(mode: off turns the term off)")
+        if not self.clothing_m >= 0:
+            raise ConfigError(f"02_smpl_fit.silhouette.clothing_m must be 0 or more (metres), found {self.clothing_m}")
+        for name in ("surface_points", "linked_keypoints", "outline_pixels", "max_side_px"):
+            if not getattr(self, name) >= 1:
+                raise ConfigError(f"02_smpl_fit.silhouette.{name} must be at least 1, found {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
 class FitConfig:
     mode: Literal["auto", "provided", "keypoints3d", "keypoints2d"]
     keypoint_min_confidence: float
@@ -104,6 +129,7 @@ class FitConfig:
     pose_prior_anneal: list[float]
     robust_scale_anneal: list[float]
     ground: GroundConfig
+    silhouette: SilhouetteConfig
     person_shapes: list[str]
     overlay: bool
 

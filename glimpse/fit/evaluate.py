@@ -24,7 +24,7 @@ import torch
 from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
-from glimpse.body.model import BodyModel
+from glimpse.body.model import NUM_JOINTS, BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.align import Similarity, umeyama
 
@@ -64,6 +64,23 @@ def joint_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
             "sequence_aligned_m": float(np.linalg.norm(whole.apply(fit.reshape(-1, 3)) - true.reshape(-1, 3),
                                                        axis=1).mean()),
             "frame_aligned_m": float(np.mean(per_frame))}
+
+
+def shape_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray]) -> dict[str, float]:
+    """How far the fitted body's shape is from the true one (truth as in ``joint_errors``), over the vertices of
+    both in the rest pose (zero pose, each at its scale, their root joints together): ``surface_m``, the mean
+    vertex distance, and ``surface_size_aligned_m``, the same after the fitted body is scaled about its root by
+    the factor that fits best (its width and proportions, without the size one view cannot tell)."""
+    def rest(betas: np.ndarray, scale: float) -> np.ndarray:
+        with torch.no_grad():
+            out = model(torch.as_tensor(betas)[None], torch.zeros(1, 3, dtype=model.dtype),
+                        torch.zeros(1, 3 * (NUM_JOINTS - 1), dtype=model.dtype), scale=scale)
+        return (out.vertices[0] - out.joints[0, 0]).numpy()
+
+    fit, true = rest(fitted.betas, fitted.scale), rest(truth["betas"], float(truth.get("scale", 1.0)))
+    factor = float((fit * true).sum() / (fit * fit).sum())
+    return {"surface_m": float(np.linalg.norm(fit - true, axis=1).mean()),
+            "surface_size_aligned_m": float(np.linalg.norm(factor * fit - true, axis=1).mean())}
 
 
 def motion_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarray], fps: float

@@ -27,6 +27,11 @@
   Accelerations are also divided by the body's size over the template's (``KeypointBody.size_ratio``):
   in one view a smaller body nearer the camera projects to the same pixels and accelerates less, so
   in metres the term would pull every 2D fit small and near.
+- silhouette (2D tracks of people with masks, glimpse.fit.silhouette): surface points of the body that project
+  outside what may show the person, and pixels of the mask's outline no projected point reaches, each the same
+  robust square in metres at the person, averaged over the points and over the outline, times ``weight`` (as if
+  so many keypoints); on every few frames, each standing for the frames between. The mask shows what keypoints
+  do not (the top of the head, the feet, a limb whose keypoints were lost), without the keypoints' noise.
 - size prior (2D tracks without a metric size, ``size_sigma`` above 0): per fitted frame,
   ``(log(size / target) / size_sigma)^2``, size the body's over the template's (``KeypointBody.size_ratio``).
   One view cannot tell a body's size from its distance; only its proportions hint at it, and a detector's
@@ -53,6 +58,7 @@ from glimpse.fit.config import FitWeights
 from glimpse.fit.ground import height_above_plane
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.priors import JointLimits, PartedPosePrior, PosePrior, shape_energy, size_energy
+from glimpse.fit.silhouette import SilhouetteEvidence, SurfaceBody, silhouette_residuals_px
 
 HIP_NAMES = ("left_hip", "right_hip")  # relative3d is measured from their mid point
 TEMPLATE_SIZE = 1.0  # KeypointBody.size_ratio of the template (betas 0): what the size prior pulls towards
@@ -232,6 +238,39 @@ class FloorContact:
         return energy
 
 
+@dataclass(frozen=True)
+class SilhouetteTerm:
+    """The silhouette term's data (glimpse.fit.silhouette): the surface points, the masks' evidence, each
+    point's linked keypoints [S, L] (it counts in a frame only where all of them are seen), ``weight`` (as if so
+    many keypoints), the noise and robust scales and the outline's tolerance, metres at the person."""
+
+    surface: SurfaceBody
+    evidence: SilhouetteEvidence
+    links: Tensor
+    weight: float
+    noise_m: float
+    robust_m: float
+    tolerance_m: float
+
+    def per_frame(self, state: FitState, track: Track, depth_ref: Tensor, robust_factor: float) -> Tensor:
+        """[T] the term on the evidence's frames (0 on the others)."""
+        rows = self.evidence.rows
+        points = self.surface(state.betas, state.global_orient[rows], state.body_pose[rows], state.transl[rows],
+                              state.log_scale.exp())
+        K = track.K[rows]
+        pixels, depth = project(points, K, track.R[rows], track.t[rows])
+        outside_px, coverage_px, inside = silhouette_residuals_px(self.evidence, pixels, depth)
+        metres_per_px = (depth_ref[rows] / (0.5 * (K[:, 0, 0] + K[:, 1, 1])))[:, None]
+        seen = ((track.weight[rows][:, self.links] > 0).all(-1) & inside).to(points.dtype)
+        outline = self.evidence.edge_weight * inside.any(-1, keepdim=True)
+        robust = self.robust_m * robust_factor
+        outside = data_energy(outside_px * metres_per_px, seen, self.noise_m, robust) / seen.sum(-1).clamp(min=1)
+        uncovered = torch.relu(coverage_px * metres_per_px - self.tolerance_m)
+        coverage = data_energy(uncovered, outline, self.noise_m, robust) / outline.sum(-1).clamp(min=1)
+        used = self.weight * self.evidence.frame_weight * (outside + coverage)
+        return torch.zeros(len(track.frame_ids), dtype=used.dtype).index_add(0, rows, used)
+
+
 class FitEnergy:
     """E(state) for a person's track; ``terms`` returns each term (for the report), ``__call__`` the sum."""
 
@@ -245,6 +284,7 @@ class FitEnergy:
         self.use_priors = True  # False in the global stage (pose and shape are held fixed there)
         self.use_speed = False  # the speed prior, on when the scale is fitted (it is what fixes it)
         self.floor: FloorContact | None = None  # the common floor, set for the ground refit
+        self.silhouette: SilhouetteTerm | None = None  # the masks' outline (2D tracks of people with masks)
         self.size_target = TEMPLATE_SIZE  # what the size prior pulls towards: a stated height's size in its refit
         self.frames_independent = False  # True: only the per-frame terms (a batch of pose hypotheses)
         self.hips = [body.names.index(name) for name in HIP_NAMES if name in body.names]
@@ -312,6 +352,8 @@ class FitEnergy:
         if self.use_priors:
             terms["pose_prior"] = self.prior.energy(state.body_pose)
             terms["joint_limits"] = self.limits.energy(state.body_pose)
+        if self.silhouette is not None and self.use_priors and not self.frames_independent:
+            terms["silhouette"] = self.silhouette.per_frame(state, self.track, self.depth_ref, self.robust_scale_factor)
         return terms
 
     def frame_energy(self, state: FitState, keypoints: Tensor | None = None) -> Tensor:
@@ -323,7 +365,7 @@ class FitEnergy:
         """The multipliers of frame_terms' terms (the pose prior's with its annealing)."""
         w = self.weights
         return {"data": 1.0, "metric_3d": 1.0, "pose_prior": w.pose_prior * self.pose_prior_scale,
-                "joint_limits": w.joint_limits}
+                "joint_limits": w.joint_limits, "silhouette": 1.0}
 
     def terms(self, state: FitState) -> dict[str, Tensor]:
         """Every term, summed over the frames (``frames_independent``: only those of frame_terms)."""

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from glimpse.body.keypoints import keypoint_map
+from glimpse.body.model import BODY_POSE_DIM
 from glimpse.body.models import BodyModels
 from glimpse.body.motion import interpolate_pose_sequence
 from glimpse.body.params import BodyParams, read_body_shape, read_scene_smpl
@@ -31,11 +32,12 @@ from glimpse.fit.config import FitConfig, stated_person_heights, stated_person_s
 from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
 from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
-from glimpse.fit.objective import FitEnergy, FitState, Track
+from glimpse.fit.objective import FitEnergy, FitState, SilhouetteTerm, Track, motion_stride
 from glimpse.fit.priors import (PartedPosePrior, PosePrior, build_parted_pose_prior, build_pose_prior, joint_limits,
                                 representative_poses)
 from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, summary
-from glimpse.io.images import frame_name
+from glimpse.fit.silhouette import SurfaceBody, farthest_point_samples, linked_keypoints, silhouette_evidence
+from glimpse.io.images import frame_name, read_mask
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
 
 FIT_REPORT_FORMAT = "glimpse-fit-report/2"  # /2: residual keys carry their unit (_m, _px); fit stages added
@@ -62,6 +64,7 @@ class Fitter:
         self.fit_scale = config.fit_scale == "always" or (config.fit_scale == "auto" and units == "sfm")
         self.undistorter = scene_undistorter(scene)
         self._bodies: dict[tuple[str, int], KeypointBody] = {}
+        self._surfaces: dict[int, SurfaceBody] = {}
         self._prior: PosePrior | PartedPosePrior | None = None
         self._pose_hypotheses: torch.Tensor | None = None
         self._shapes: dict[str, np.ndarray] | None = None
@@ -180,6 +183,8 @@ class Fitter:
         body = self.keypoint_body(layout, person.pid)
         energy = FitEnergy(body, track, self.prior, joint_limits(self.dtype), self.config.weights,
                            self.config.max_interpolated_gap)
+        if track.is_2d and self.config.silhouette.mode == "auto" and person.masks:
+            energy.silhouette = self.silhouette_term(person, track, body)
         c = self.config
         if len(c.robust_scale_anneal) != len(c.pose_prior_anneal):
             raise GlimpseError(f"02_smpl_fit.robust_scale_anneal {c.robust_scale_anneal} and pose_prior_anneal "
@@ -263,6 +268,43 @@ class Fitter:
         if pending.person.pid in self.stated_shapes:
             info["shape_stated_from"] = str(self._shape_files[pending.person.pid])
         return params, info
+
+    def surface_body(self, pid: str) -> SurfaceBody:
+        """Person ``pid``'s body model's surface points of the silhouette term (one per model)."""
+        model = self.models[pid]
+        if id(model) not in self._surfaces:
+            rest = model.v_template.double().numpy()
+            self._surfaces[id(model)] = SurfaceBody(model, farthest_point_samples(
+                rest, self.config.silhouette.surface_points))
+        return self._surfaces[id(model)]
+
+    def silhouette_term(self, person: HumanInputs, track: Track, body: KeypointBody) -> SilhouetteTerm | None:
+        """The silhouette term of a 2D track from the person's masks (and the others', who may hide them) on
+        frames about ``silhouette.rate_hz`` apart; None when none of those frames has a mask."""
+        c = self.config.silhouette
+        frame_ids = track.frame_ids.numpy()
+        stride = motion_stride(track.times_s, c.rate_hz)
+        rows = np.array([i for i in range(0, len(frame_ids), stride) if int(frame_ids[i]) in person.masks])
+        if not len(rows):
+            return None
+        own, others = [], []
+        for fid in frame_ids[rows].tolist():
+            own.append(self.undistorter.mask(read_mask(person.masks[fid])))
+            union = np.zeros_like(own[-1])
+            for other in self.scene.humans.values():
+                if other.pid != person.pid and fid in other.masks:
+                    union |= self.undistorter.mask(read_mask(other.masks[fid]))
+            others.append(union)
+        evidence = silhouette_evidence(rows, own, others, stride, c.max_side_px, c.outline_pixels, self.dtype)
+        surface = self.surface_body(person.pid)
+        zero = torch.zeros(1, 3, dtype=self.dtype)
+        with torch.no_grad():
+            rest_keypoints = body(torch.zeros(body.joint_shapedirs.shape[-1], dtype=self.dtype), zero,
+                                  torch.zeros(1, BODY_POSE_DIM, dtype=self.dtype), zero,
+                                  torch.ones((), dtype=self.dtype)).keypoints[0]
+        links = linked_keypoints(surface.template.numpy(), rest_keypoints.numpy(), c.linked_keypoints)
+        return SilhouetteTerm(surface, evidence, torch.as_tensor(links), c.weight, c.noise_m, c.robust_m,
+                              0.5 * surface.spacing_m() + c.clothing_m)
 
     def _track(self, person: HumanInputs, mode: str) -> tuple[Track, str]:
         """The person's confident keypoints on the frames with a camera and enough of them."""
