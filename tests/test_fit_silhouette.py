@@ -16,11 +16,11 @@ from glimpse.errors import ConfigError
 from glimpse.fit.config import FitConfig
 from glimpse.fit.evaluate import body_joints
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import FitSchedule, fit_track, initial_state_2d
+from glimpse.fit.keypoint_fit import FitSchedule, fit_track, initial_state_2d, mean_shape_keypoints
 from glimpse.fit.objective import FitEnergy, FitState, SilhouetteTerm, Track
 from glimpse.fit.priors import build_pose_prior, joint_limits
-from glimpse.fit.silhouette import (SurfaceBody, farthest_point_samples, linked_keypoints, outline_points,
-                                    sample_outside_px, silhouette_evidence)
+from glimpse.fit.sampling import farthest_point_samples
+from glimpse.fit.silhouette import SurfaceBody, linked_keypoints, outline_points, sample_outside_px, silhouette_evidence
 from glimpse.fixtures.scenes import intrinsics, look_at_pose
 from glimpse.render.mesh_raster import rasterize_triangles
 
@@ -116,10 +116,8 @@ def _term(model: BodyModel, body: KeypointBody, config: FitConfig, track: Track,
     rows = np.arange(len(masks))
     evidence = silhouette_evidence(rows, masks, [np.zeros_like(m) for m in masks], 1.0, c.max_side_px,
                                    c.outline_pixels, F64)
-    zero = torch.zeros(1, 3, dtype=F64)
-    rest = body(torch.zeros(10, dtype=F64), zero, torch.zeros(1, 69, dtype=F64), zero,
-                torch.ones((), dtype=F64)).keypoints[0]
-    links = torch.as_tensor(linked_keypoints(surface.template.numpy(), rest.numpy(), c.linked_keypoints))
+    rest, _ = mean_shape_keypoints(body, torch.zeros(69, dtype=F64))
+    links = torch.as_tensor(linked_keypoints(surface.template.numpy(), rest, c.linked_keypoints))
     return SilhouetteTerm(surface, evidence, links, c.weight, c.noise_m, c.robust_m,
                           0.5 * surface.spacing_m() + c.clothing_m)
 

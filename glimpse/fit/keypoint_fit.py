@@ -87,7 +87,7 @@ def _global_indices(body: KeypointBody) -> list[int]:
     return _torso_indices(body) + [body.names.index(name) for name in HEAD if name in body.names]
 
 
-def _rest(body: KeypointBody, pose: Tensor) -> tuple[np.ndarray, np.ndarray]:
+def mean_shape_keypoints(body: KeypointBody, pose: Tensor) -> tuple[np.ndarray, np.ndarray]:
     """Keypoints [K, 3] and root joint [3] of the mean-shape body in ``pose`` [69], unrotated, at the origin."""
     zero = torch.zeros(1, 3, dtype=pose.dtype)
     with torch.no_grad():
@@ -112,7 +112,7 @@ def _nearest_filled(values: list, default):
 
 def initial_state_3d(body: KeypointBody, track: Track, pose: Tensor, fit_scale: bool) -> FitState:
     torso = _torso_indices(body)
-    rest, root = _rest(body, pose)
+    rest, root = mean_shape_keypoints(body, pose)
     points, weight = track.points.numpy(), track.weight.numpy()
     solved: list = []
     for t in range(len(points)):
@@ -133,7 +133,7 @@ def initial_state_3d(body: KeypointBody, track: Track, pose: Tensor, fit_scale: 
 
 
 def initial_state_2d(body: KeypointBody, track: Track, pose: Tensor) -> FitState:
-    rest, root = _rest(body, pose)
+    rest, root = mean_shape_keypoints(body, pose)
     points, weight = track.points.numpy(), track.weight.numpy()
     K, R, t = track.K.numpy(), track.R.numpy(), track.t.numpy()
     facing: list = []

@@ -24,6 +24,7 @@ import torch
 from torch import Tensor
 
 from glimpse.body.motion import BUILTIN_MOTIONS, SMPL_BODY_JOINTS, builtin_motion, load_motion
+from glimpse.fit.sampling import farthest_point_samples
 
 PRIOR_FPS = 30.0  # built-in motions are sampled at this rate ...
 PRIOR_SECONDS = 4.0  # ... over this long (a few cycles of each)
@@ -74,13 +75,9 @@ def representative_poses(sources: list[str], count: int) -> np.ndarray:
     Deterministic."""
     poses = motion_poses(sources)
     poses = np.concatenate([poses, mirror_body_pose(poses)])
-    chosen = [poses.mean(0)]
-    nearest = np.linalg.norm(poses - chosen[0], axis=1)
-    while len(chosen) < min(count, len(poses) + 1):
-        far = int(nearest.argmax())
-        chosen.append(poses[far])
-        nearest = np.minimum(nearest, np.linalg.norm(poses - poses[far], axis=1))
-    return np.stack(chosen)
+    mean = poses.mean(0)
+    spread = farthest_point_samples(poses, max(count - 1, 0), np.linalg.norm(poses - mean, axis=1))
+    return np.concatenate([mean[None], poses[spread]])
 
 
 @dataclass(frozen=True)

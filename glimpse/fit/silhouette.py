@@ -32,18 +32,6 @@ from glimpse.body.lbs import batch_rigid_transform, batch_rodrigues, blend_shape
 from glimpse.body.model import BodyModel
 
 
-def farthest_point_samples(points: np.ndarray, count: int) -> np.ndarray:
-    """[count] indices into points [N, 3] spread evenly over them (farthest-point sampling from index 0;
-    deterministic). count is capped at N."""
-    count = min(count, len(points))
-    chosen = np.zeros(count, np.int64)
-    distance = np.full(len(points), np.inf)
-    for i in range(1, count):
-        distance = np.minimum(distance, ((points - points[chosen[i - 1]]) ** 2).sum(1))
-        chosen[i] = int(distance.argmax())
-    return chosen
-
-
 class SurfaceBody(torch.nn.Module):
     """``scale * posed + transl`` of a subset of the body model's vertices, exactly as BodyModel poses them
     (shape and pose blend shapes, linear blend skinning), without posing the others."""

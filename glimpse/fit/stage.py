@@ -31,12 +31,14 @@ from glimpse.errors import GlimpseError
 from glimpse.fit.config import FitConfig, stated_person_heights, stated_person_shapes
 from glimpse.fit.floor_fit import PendingFit, place_on_common_floor
 from glimpse.fit.keypoint_body import KeypointBody
-from glimpse.fit.keypoint_fit import FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d
+from glimpse.fit.keypoint_fit import (FitOutcome, FitSchedule, fit_track, initial_state_2d, initial_state_3d,
+                                     mean_shape_keypoints)
 from glimpse.fit.objective import FitEnergy, FitState, SilhouetteTerm, Track, motion_stride
 from glimpse.fit.priors import (PartedPosePrior, PosePrior, build_parted_pose_prior, build_pose_prior, joint_limits,
                                 representative_poses)
 from glimpse.fit.residuals import body_keypoints, residuals_2d, residuals_3d, summary
-from glimpse.fit.silhouette import SurfaceBody, farthest_point_samples, linked_keypoints, silhouette_evidence
+from glimpse.fit.sampling import farthest_point_samples
+from glimpse.fit.silhouette import SurfaceBody, linked_keypoints, silhouette_evidence
 from glimpse.io.images import frame_name, read_mask
 from glimpse.scene import HumanInputs, Scene, read_keypoints2d, read_keypoints3d
 
@@ -297,12 +299,8 @@ class Fitter:
             others.append(union)
         evidence = silhouette_evidence(rows, own, others, stride, c.max_side_px, c.outline_pixels, self.dtype)
         surface = self.surface_body(person.pid)
-        zero = torch.zeros(1, 3, dtype=self.dtype)
-        with torch.no_grad():
-            rest_keypoints = body(torch.zeros(body.joint_shapedirs.shape[-1], dtype=self.dtype), zero,
-                                  torch.zeros(1, BODY_POSE_DIM, dtype=self.dtype), zero,
-                                  torch.ones((), dtype=self.dtype)).keypoints[0]
-        links = linked_keypoints(surface.template.numpy(), rest_keypoints.numpy(), c.linked_keypoints)
+        rest_keypoints, _ = mean_shape_keypoints(body, torch.zeros(BODY_POSE_DIM, dtype=self.dtype))
+        links = linked_keypoints(surface.template.numpy(), rest_keypoints, c.linked_keypoints)
         return SilhouetteTerm(surface, evidence, torch.as_tensor(links), c.weight, c.noise_m, c.robust_m,
                               0.5 * surface.spacing_m() + c.clothing_m)
 
