@@ -24,7 +24,7 @@ import torch
 from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
-from glimpse.body.model import NUM_JOINTS, BodyModel
+from glimpse.body.model import AXIS_ANGLE_DIM, BODY_POSE_DIM, BodyModel
 from glimpse.body.params import BodyParams
 from glimpse.cameras.align import Similarity, umeyama
 
@@ -73,8 +73,8 @@ def shape_errors(model: BodyModel, fitted: BodyParams, truth: dict[str, np.ndarr
     the factor that fits best (its width and proportions, without the size one view cannot tell)."""
     def rest(betas: np.ndarray, scale: float) -> np.ndarray:
         with torch.no_grad():
-            out = model(torch.as_tensor(betas)[None], torch.zeros(1, 3, dtype=model.dtype),
-                        torch.zeros(1, 3 * (NUM_JOINTS - 1), dtype=model.dtype), scale=scale)
+            out = model(betas, torch.zeros(1, AXIS_ANGLE_DIM, dtype=model.dtype),
+                        torch.zeros(1, BODY_POSE_DIM, dtype=model.dtype), scale=scale)
         return (out.vertices[0] - out.joints[0, 0]).numpy()
 
     fit, true = rest(fitted.betas, fitted.scale), rest(truth["betas"], float(truth.get("scale", 1.0)))
