@@ -589,6 +589,8 @@ def test_feet_rank_people_by_their_recent_median_so_a_hidden_persons_guessed_fee
 
 
 def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the_plate() -> None:
+    from dataclasses import replace
+
     from glimpse.ingest.config import load_ingest_config
     from glimpse.ingest.foreground import surroundings_fill
     from glimpse.ingest.tracker import Tracker
@@ -602,7 +604,7 @@ def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the
     fill = surroundings_fill(image, person)
     np.testing.assert_allclose(fill[140, 25], (200, 40, 40), atol=6)  # the person's own pixels do not count
     tracker = Tracker.__new__(Tracker)
-    tracker.config = load_ingest_config()
+    tracker.config = replace(load_ingest_config(), paint_still_with="surroundings")
     moved = np.zeros_like(person)
     moved[80:200, 200:240] = True  # a second person, who walked: the plate shows the background behind them
     image[moved] = (20, 200, 20)
@@ -612,6 +614,56 @@ def test_people_the_plate_holds_are_painted_with_their_surroundings_not_with_the
     np.testing.assert_allclose(painted[140, 25], (200, 40, 40), atol=6)
     assert np.array_equal(painted[140, 220], (40, 40, 200))
     assert np.array_equal(painted[~(person | moved)], image[~(person | moved)])
+
+
+def test_people_the_plate_holds_can_be_painted_with_the_plates_texture_from_beside_them() -> None:
+    from dataclasses import replace
+
+    from glimpse.ingest.config import load_ingest_config
+    from glimpse.ingest.foreground import beside_fill
+    from glimpse.ingest.tracker import Tracker
+
+    stripes = np.zeros((240, 320, 3), np.uint8)
+    stripes[:, :, 0] = (np.arange(320) * 7 % 256)[None]  # a texture that says where each pixel came from
+    stripes[:, :, 1] = np.arange(240)[:, None]
+    pixels = np.zeros((240, 320), bool)
+    pixels[80:200, 20:60] = True  # 40 px wide, near the left edge: the right side has all of its pixels
+    pixels[10:30, 280:310] = True  # a second region, 30 px wide, near the right edge: the left side has them
+    fill, given = beside_fill(stripes, pixels, 5)
+    assert np.array_equal(given, pixels)
+    assert np.array_equal(fill[80:200, 20:60], stripes[80:200, 65:105])  # shifted right by 40 + 5
+    assert np.array_equal(fill[10:30, 280:310], stripes[10:30, 245:275])  # shifted left by 30 + 5
+    blocked = pixels.copy()
+    blocked[80:200, 60:80] = True  # the region grown to 60 px: its source moves past it, 65 px to the right
+    fill, given = beside_fill(stripes, blocked, 5)
+    assert given[100, 20:80].all() and not given[100, :20].any()
+    assert np.array_equal(fill[100, 20:80], stripes[100, 85:145])
+    blocked[80:200, 85:145] = True  # a region there too: the left side, where it is inside the frame (x >= 0)
+    fill, given = beside_fill(stripes, blocked, 5)
+    assert np.array_equal(given[100, 20:80], np.arange(20, 80) >= 65)
+    assert np.array_equal(fill[100, 65:80], stripes[100, 0:15])
+
+    tracker = Tracker.__new__(Tracker)
+    tracker.config = replace(load_ingest_config(), paint_still_with="beside")
+    image = stripes.copy()
+    image[pixels] = (20, 200, 20)  # people who stood still all video: the plate shows them
+    tracker.plate = image.copy()
+    painted = tracker._painted_over(image, pixels)
+    margin = round(0.02 * 240)  # the tracker's margin: STILL_WIDTH of the frame's height
+    # inside the region (its corners, narrower than STILL_WIDTH, are left to the plate)
+    assert np.array_equal(painted[90:190, 25:55], stripes[90:190, 65 + margin:95 + margin])
+    assert np.array_equal(painted[~pixels], image[~pixels])
+    walker = np.zeros_like(pixels)
+    walker[60:220, 60:130] = True  # someone moving there now (the frame differs from the plate): not copied
+    image[walker] = (250, 250, 250)
+    painted = tracker._painted_over(image, pixels)
+    assert not (painted[pixels] == (250, 250, 250)).all(axis=-1).any()
+    shift = 40 + margin  # the region's width and the margin
+    assert np.array_equal(painted[100, shift:60], stripes[100, 0:60 - shift])  # from the left, where it can (x >= 0)
+    someone = np.zeros_like(pixels)
+    someone[:, :20] = True  # a still person there, found (their body): not copied either
+    painted = tracker._painted_over(image, pixels, someone)
+    assert not (painted[100, shift:60] == stripes[100, 0:60 - shift]).all(axis=-1).any()
 
 
 def test_a_new_person_who_looks_like_a_track_better_than_what_it_followed_is_that_tracks_person() -> None:

@@ -61,6 +61,7 @@ class IngestConfig:
     foreground_person_aspect: float
     foreground_rounds: int
     foreground_min_differing: float
+    paint_still_with: Literal["surroundings", "beside"]
     gap_masks: bool
     gap_mask_max_frames: int
     gap_mask_box_grow: float

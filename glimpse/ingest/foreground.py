@@ -87,3 +87,28 @@ def surroundings_fill(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     colour = cv2.GaussianBlur(colour, (0, 0), sigma)
     fill = colour / np.maximum(weight, FILL_MIN_WEIGHT)[..., None]
     return np.clip(cv2.resize(fill, (width, height), interpolation=cv2.INTER_LINEAR), 0, 255).astype(np.uint8)
+
+
+def beside_fill(source: np.ndarray, pixels: np.ndarray, margin: int, blocked: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """([H, W, 3] uint8 fill, [H, W] bool where it is given): each connected region of ``pixels`` [H, W] bool takes
+    ``source``'s pixels (the background plate) one region's width plus ``margin`` pixels to its left or right, from the
+    side with more of them inside the frame and off ``blocked`` [H, W] bool (default: ``pixels``), then from the other
+    side where that one has none. Covers a person the plate shows (they stood still) with the background's own
+    texture from beside them: a flat patch of their surroundings' colour, person-shaped, is itself taken for a body
+    by the landmark model."""
+    width = pixels.shape[1]
+    blocked = pixels if blocked is None else blocked
+    fill, given = np.zeros_like(source), np.zeros_like(pixels)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(pixels.astype(np.uint8))
+    for label in range(1, count):
+        ys, xs = np.nonzero(labels == label)
+        shift = int(stats[label, cv2.CC_STAT_WIDTH]) + margin
+        sources = [xs - shift, xs + shift]
+        valid = [(x >= 0) & (x < width) & ~blocked[ys, np.clip(x, 0, width - 1)] for x in sources]
+        order = sorted(range(2), key=lambda side: -int(valid[side].sum()))
+        for side in reversed(order):  # the better side last: it overwrites where both have a pixel
+            ok = valid[side]
+            fill[ys[ok], xs[ok]] = source[ys[ok], sources[side][ok]]
+            given[ys[ok], xs[ok]] = True
+    return fill, given

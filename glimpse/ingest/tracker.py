@@ -50,7 +50,7 @@ from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, outside_image, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.detection import detector_regions
-from glimpse.ingest.foreground import differs_from_plate, foreground_candidates, surroundings_fill
+from glimpse.ingest.foreground import beside_fill, differs_from_plate, foreground_candidates, surroundings_fill
 from glimpse.ingest.observation import (
     MID_HIPS,
     Observation,
@@ -213,7 +213,7 @@ class Tracker:
         height, width = theirs.shape
         if not theirs[max(y0, 0):min(y1, height), max(x0, 0):min(x1, width)].any():
             return observation.image, observation.landmarks
-        painted = self._painted_over(observation.image, theirs)
+        painted = self._painted_over(observation.image, theirs, theirs | own_body)
         landmarks = self.model.landmarks(painted, observation.landmarks.region, self.config.landmark_refine_heatmap,
                                          self.config.landmark_flip_average)
         if landmarks.score < self.config.landmark_min_presence:
@@ -230,7 +230,7 @@ class Tracker:
         lies on the others more than ``track_backfill_keypoints_max_overlap`` (the model's guess at someone
         mostly hidden)."""
         config = self.config
-        observation = self.observe(self._painted_over(image, others), region, image, others)
+        observation = self.observe(self._painted_over(image, others, others), region, image, others)
         if observation is None:
             return None
         if (self._lies_on(observation, others, config.track_behind_max_overlap)
@@ -292,11 +292,14 @@ class Tracker:
             union |= self._body_pixels(observation)
         return union
 
-    def _painted_over(self, image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-        """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and by the colour of
-        their surroundings (:func:`surroundings_fill`) where there is no plate or where the plate shows what the
-        image shows (within ``foreground_threshold``, in regions at least STILL_WIDTH wide): a person who stands
-        still for most of the video is in the plate, and painting them with it would paint them back."""
+    def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None) -> np.ndarray:
+        """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and where there is no
+        plate, by the colour of their surroundings (:func:`surroundings_fill`). Where the plate shows what the image
+        shows (within ``foreground_threshold``, in regions at least STILL_WIDTH wide) a person stood still for most
+        of the video and painting them with the plate would paint them back: there, the colour of their
+        surroundings, or with ``paint_still_with: beside`` the plate's texture from beside them where it has some
+        (:func:`beside_fill`, from pixels where the frame shows the plate and that are not on ``people`` [H, W]
+        bool, the bodies of everyone found: nobody's texture is copied)."""
         painted = image.copy()
         to_fill = pixels
         if self.plate is not None:
@@ -307,6 +310,11 @@ class Tracker:
             to_fill = cv2.morphologyEx(still.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
         if to_fill.any():
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
+            if self.plate is not None and self.config.paint_still_with == "beside":
+                blocked = pixels | differs_from_plate(image, self.plate, self.config.foreground_threshold)
+                fill, given = beside_fill(self.plate, to_fill, round(STILL_WIDTH * image.shape[0]),
+                                          blocked if people is None else blocked | people)
+                painted[given] = fill[given]
         return painted
 
     def _look_behind_all(self, image: np.ndarray, followed: dict[int, Observation], tracks: list[Track]) -> None:
@@ -357,7 +365,8 @@ class Tracker:
         # pixels nearer to where this person should be than to anyone found stay
         own = skeleton_distance(track.predicted_landmarks(), bodies.shape)
         hidden = bodies & (np.min([observed_skeleton_distance(o) for o in found], axis=0) <= own)
-        observation = self.observe(self._painted_over(image, hidden), track.predicted_region(), image, hidden)
+        observation = self.observe(self._painted_over(image, hidden, bodies), track.predicted_region(), image,
+                                   hidden)
         if observation is None or self._taken(observation, found, self.config.track_behind_max_overlap, bodies):
             return None
         # someone else was behind them: a lost track comes back only as it looked, a followed one as when followed
@@ -374,7 +383,7 @@ class Tracker:
             if painted_for != len(observed + fresh):
                 painted_for = len(observed + fresh)
                 bodies = self._bodies(observed + fresh, image.shape[:2])
-                painted = self._painted_over(image, bodies)
+                painted = self._painted_over(image, bodies, bodies)
             self._keep_new(self.observe(painted, region, image, bodies), observed, fresh, bodies)
         if self.plate is None:
             return fresh
@@ -391,7 +400,7 @@ class Tracker:
                 if len(tried) and box_iou(box[None], tried).max() > SAME_REGION_IOU:
                     continue
                 tried = np.concatenate([tried, box[None]])
-                painted = self._painted_over(image, candidate.paint)
+                painted = self._painted_over(image, candidate.paint, explained)
                 observation = self.observe(painted, candidate.region, image, candidate.paint)
                 if observation is not None and self._shown_by_plate(image, observation):
                     continue
