@@ -106,8 +106,8 @@ def beside_fill(source: np.ndarray, pixels: np.ndarray, margin: int, blocked: np
         shift = int(stats[label, cv2.CC_STAT_WIDTH]) + margin
         sources = [xs - shift, xs + shift]
         valid = [(x >= 0) & (x < width) & ~blocked[ys, np.clip(x, 0, width - 1)] for x in sources]
-        order = sorted(range(2), key=lambda side: -int(valid[side].sum()))
-        for side in reversed(order):  # the better side last: it overwrites where both have a pixel
+        # the side with more pixels last: it overwrites where both have one (a tie: the left side)
+        for side in sorted((1, 0), key=lambda side: int(valid[side].sum())):
             ok = valid[side]
             fill[ys[ok], xs[ok]] = source[ys[ok], sources[side][ok]]
             given[ys[ok], xs[ok]] = True

@@ -302,17 +302,18 @@ class Tracker:
         bool, the bodies of everyone found: nobody's texture is copied)."""
         painted = image.copy()
         to_fill = pixels
+        still_px = round(STILL_WIDTH * image.shape[0])
         if self.plate is not None:
             painted[pixels] = self.plate[pixels]
             still = np.zeros_like(pixels)
             still[pixels] = ~differs_from_plate(image[pixels], self.plate[pixels], self.config.foreground_threshold)
-            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, round(STILL_WIDTH * image.shape[0])),) * 2)
+            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, still_px),) * 2)
             to_fill = cv2.morphologyEx(still.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
         if to_fill.any():
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
             if self.plate is not None and self.config.paint_still_with == "beside":
                 blocked = pixels | differs_from_plate(image, self.plate, self.config.foreground_threshold)
-                fill, given = beside_fill(self.plate, to_fill, round(STILL_WIDTH * image.shape[0]),
+                fill, given = beside_fill(self.plate, to_fill, still_px,
                                           blocked if people is None else blocked | people)
                 painted[given] = fill[given]
         return painted
