@@ -13,29 +13,62 @@ from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
 from glimpse.ingest.blazepose import BODY_LANDMARKS, LANDMARK_SIZE, REGION_GROW, PoseLandmarks
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
-from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.observation import Observation, Track, skeleton_distance
 from glimpse.ingest.tracker import Tracker
 
 SIZE = (120, 200)  # H, W of the frames
 BOX_HEIGHT = 60.0
+# the stand-in's skeleton: (landmarks, column from the box's centre, row): head, shoulders, arms, hips, legs. Its
+# torso is 20 px long, so the pixels within mask_body_radius (0.25 torso lengths) of it lie within 5 px.
+STICK = ((range(11), 0, 38), ((11,), -6, 45), ((12,), 6, 45), ((13, 15, 17, 19, 21), -8, 58),
+         ((14, 16, 18, 20, 22), 8, 58), ((23,), -5, 65), ((24,), 5, 65), ((25, 27, 29, 31), -4, 85),
+         ((26, 28, 30, 32), 4, 85))
 
 
 def _box_at(x: float) -> np.ndarray:
     return np.array([x - 10.0, 30.0, x + 10.0, 30.0 + BOX_HEIGHT])
 
 
+def _stick_at(x: float) -> np.ndarray:
+    """[33, 2] the stand-in skeleton's landmarks, centred at column x."""
+    points = np.zeros((BODY_LANDMARKS, 2))
+    for indices, column, row in STICK:
+        points[list(indices)] = (x + column, row)
+    return points
+
+
+def _box_mask(x: float) -> np.ndarray:
+    """[H, W] bool: the pixels of the box centred at column x."""
+    mask = np.zeros(SIZE, bool)
+    x0, y0, x1, y1 = np.round(_box_at(x)).astype(int)
+    mask[y0:y1, x0:x1] = True
+    return mask
+
+
 def _observation(x: float, look: np.ndarray) -> Observation:
     """A person whose box is centred at column x; their mask and body: the box's pixels."""
     box = _box_at(x)
     region = Region(np.array([x, 60.0]), BOX_HEIGHT * REGION_GROW, 0.0)
-    landmarks = PoseLandmarks(points=np.tile([x, 60.0], (BODY_LANDMARKS, 1)), visibility=np.ones(BODY_LANDMARKS),
+    landmarks = PoseLandmarks(points=_stick_at(x), visibility=np.ones(BODY_LANDMARKS),
                               presence=np.ones(BODY_LANDMARKS), world=np.zeros((BODY_LANDMARKS, 3)), score=1.0,
                               next_region=region, segmentation=np.zeros((LANDMARK_SIZE, LANDMARK_SIZE)), region=region)
-    mask = np.zeros(SIZE, bool)
-    x0, y0, x1, y1 = np.round(box).astype(int)
-    mask[y0:y1, x0:x1] = True
+    mask = _box_mask(x)
     keypoints = np.concatenate([np.tile([x, 60.0], (17, 1)), np.ones((17, 1))], 1)
     return Observation(landmarks, mask.astype(np.float32), mask, box, look, 1.0, keypoints, body=mask)
+
+
+def _near_stick(x: float, radius: float) -> np.ndarray:
+    """[H, W] bool: the pixels within ``radius`` torso lengths of the stand-in skeleton centred at column x."""
+    return skeleton_distance(_observation(x, np.zeros((2, 36))).landmarks, SIZE) < radius
+
+
+def _finding_at_the_centre(look: np.ndarray, covered_seen: list[np.ndarray]):
+    """A stand-in for Tracker.observe that finds a person at its region's centre and keeps each look's painted
+    pixels in ``covered_seen``."""
+    def observe(self, image, region, original=None, covered=None):
+        covered_seen.append(covered.copy())
+        return _observation(float(region.centre[0]), look)
+    return observe
 
 
 @pytest.fixture
@@ -92,9 +125,10 @@ def test_someone_lying_on_the_others_or_looking_otherwise_is_not_taken(tracker, 
     other_look[:, 0] = 1.0
     for found_look, others_column, taken in ((look, 150, True), (other_look, 150, False), (look, 0, False)):
         track, again, gaps = _seen_at_0_then_again_at_4(tracker, look)
+        # the model finds someone 15 px right of where the person was expected: off the pixels spared there
         monkeypatch.setattr(Tracker, "observe",
                             lambda self, image, region, original=None, covered=None, found_look=found_look:
-                            _observation(float(region.centre[0]), found_look))
+                            _observation(float(region.centre[0]) + 15.0, found_look))
         labels = {f: np.zeros(SIZE, np.uint16) for f in (1, 2, 3)}
         for frame in labels:
             labels[frame][:, others_column:] = 7  # from column 0: someone else holds the whole frame
@@ -121,6 +155,48 @@ def test_someone_found_mostly_on_the_others_keeps_the_frame_but_not_the_keypoint
     assert (track.keypoints[2][:, 2] == 0).all() and (track.keypoints[2][:, :2] == 0).all()  # frame 3: not seen
     assert (track.keypoints[1][:, 2] == 1).all()  # frame 2 keeps its keypoints
     assert (labels[3] == 1).sum() == 8 * BOX_HEIGHT  # frame 3 still gets the pixels nobody held
+
+
+def test_where_nobody_is_found_the_others_are_painted_over_but_near_where_the_person_was_expected(
+        tracker, monkeypatch) -> None:
+    """A missed frame is looked at once more where the first look finds nobody, the others painted over but near
+    where the person was expected there: a person the model fitted one skeleton over two people with holds the lost
+    one's pixels in its labels."""
+    look = np.full((2, 36), 1 / 36)
+    track, again, gaps = _seen_at_0_then_again_at_4(tracker, look)
+    covered_seen: list[np.ndarray] = []
+    monkeypatch.setattr(Tracker, "observe", _finding_at_the_centre(look, covered_seen))
+    labels = {3: np.zeros(SIZE, np.uint16)}
+    labels[3][:, 100:] = 7  # the other person's labels cover the whole of where the lost one is (x = 130)
+    theirs = labels[3] == 7
+    images = {3: np.full(SIZE + (3,), 3, np.uint8)}
+    filled = fill_gaps(tracker, gaps, [(track, again)], 4, images, lambda f: labels[f],
+                       lambda f, new: labels.__setitem__(f, new))
+    near = _near_stick(130.0, tracker.config.mask_body_radius)  # frame 4's skeleton moved to frame 3's box
+    # first look: all of theirs painted over, and what is found lies on them; then all but near where expected
+    assert len(covered_seen) == 2 and (covered_seen[0] == theirs).all() and (covered_seen[1] == theirs & ~near).all()
+    assert filled == [(0, 3)] and (track.keypoints[track.frames.index(3)][:, 2] == 1).all()  # found, keypoints kept
+    assert ((labels[3] == 1) == near & _box_mask(130.0)).all()  # it takes its body near where it was expected
+    assert (labels[3][:, 145:] == 7).all() and (labels[3][:, 100:115] == 7).all()
+
+
+@pytest.mark.parametrize("recorded_at, taken", [(170.0, True), (130.0, False)])
+def test_the_second_look_does_not_take_someone_recorded_in_that_frame(tracker, monkeypatch, recorded_at: float,
+                                                                     taken: bool) -> None:
+    """With the others' pixels left near where the person was expected, the second look may find one of them."""
+    look = np.full((2, 36), 1 / 36)
+    track, again, gaps = _seen_at_0_then_again_at_4(tracker, look)
+    other = Track(1, _observation(recorded_at, look).landmarks, look.copy())
+    tracker._update(other, _observation(recorded_at, look), 3)
+    tracker.tracks.append(other)
+    monkeypatch.setattr(Tracker, "observe", lambda self, image, region, original=None, covered=None:
+                        _observation(float(region.centre[0]), look))
+    labels = {3: np.zeros(SIZE, np.uint16)}
+    labels[3][:, 100:] = 2  # the other track's labels cover the whole of where this one's person is expected
+    images = {3: np.full(SIZE + (3,), 3, np.uint8)}
+    filled = fill_gaps(tracker, gaps, [(track, again)], 4, images, lambda f: labels[f],
+                       lambda f, new: labels.__setitem__(f, new))
+    assert (filled == [(0, 3)]) == taken and (3 in track.frames) == taken and (labels[3] == 1).any() == taken
 
 
 def test_only_tracks_missing_at_most_the_backfill_frames_have_an_open_gap(tracker) -> None:
@@ -157,3 +233,20 @@ def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracke
     assert looked == [(4, pytest.approx(140.0)), (3, pytest.approx(130.0)), (2, pytest.approx(120.0))]
     assert filled == [(0, 4), (0, 3)] and track.frames == [3, 4, 5] and track.looked_again == [4, 3]
     assert (labels[3] == 1).any() and not labels[2].any() and not labels[1].any()
+
+
+def test_a_track_started_late_does_not_look_a_second_time_past_the_others(tracker, monkeypatch) -> None:
+    """Often a second track on someone followed: looking past them where they are would take their pixels."""
+    look = np.full((2, 36), 1 / 36)
+    started = _observation(140.0, look)
+    track = Track(0, started.landmarks, look.copy())
+    tracker.tracks = [track]
+    tracker._update(track, started, 5)
+    covered_seen: list[np.ndarray] = []
+    monkeypatch.setattr(Tracker, "observe", _finding_at_the_centre(look, covered_seen))
+    labels = {4: np.zeros(SIZE, np.uint16)}
+    labels[4][:, 100:] = 7  # someone else holds all of where the track's person would be in frame 4
+    images = {4: np.full(SIZE + (3,), 4, np.uint8)}
+    filled = look_before_start(tracker, [track], 5, images, lambda f: labels[f],
+                               lambda f, new: labels.__setitem__(f, new))
+    assert len(covered_seen) == 1 and filled == [] and (labels[4][:, 100:] == 7).all()

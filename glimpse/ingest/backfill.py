@@ -8,23 +8,26 @@ are the ones a reconstruction needs most. When a track sees its person again aft
 ``track_backfill_frames`` frames, each missed frame still held is looked at again, backwards from where the person
 is seen again: the region around the box between the person's boxes before the gap and at the next sighting
 (interpolated over time; a frame filled is the next sighting for the one before it, as when a detector's box starts
-a region), with the people found in that frame painted over. What is found there is kept only under the rules of
-looking behind someone (mostly off the others' pixels, looking like the track as a re-identified person must); it
-is given the pixels of its segmentation that nobody found in that frame holds (whoever a track lost was behind
+a region), with the people found in that frame painted over, and where that finds nobody, once more with their
+pixels near where the person was expected left (the model, losing someone behind another person, often fits one
+skeleton over both, whose labels then hold the lost one's pixels). What is found there is kept only under the rules
+of looking behind someone (mostly off the others' pixels, looking like the track as a re-identified person must);
+it is given the pixels of its segmentation that nobody found in that frame holds (whoever a track lost was behind
 them), and nothing is invented for frames where the person stays hidden. A track that starts late (someone
-entering, or first seen from behind) looks back the same way, frame by frame, until a frame without its person.
+entering, or first seen from behind) looks back the same way, frame by frame, until a frame without its person,
+with the first look only (often it is a second track on someone followed).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from glimpse.ingest.blazepose import REGION_GROW
+from glimpse.ingest.blazepose import REGION_GROW, PoseLandmarks
 from glimpse.ingest.crop import Region, region_around_box
-from glimpse.ingest.observation import Observation, Track
+from glimpse.ingest.observation import Observation, Track, skeleton_distance
 from glimpse.ingest.tracker import Tracker
 
 
@@ -56,15 +59,17 @@ def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list[tuple[Track
         gap = gaps.get(track.index)
         if gap is None:
             continue
-        later, later_frame = observation.box, frame_id  # the nearest later sighting
+        later, later_frame = observation, frame_id  # the nearest later sighting
         for missed in range(frame_id - 1, gap.last_frame, -1):
             if missed not in images:
                 continue
             weight = (missed - gap.last_frame) / (later_frame - gap.last_frame)
-            region = region_around_box((1 - weight) * gap.box + weight * later, REGION_GROW)
-            found = _look_again(tracker, track, missed, region, images[missed], labels_of, write_labels)
+            box = (1 - weight) * gap.box + weight * later.box
+            expected = _moved(later.landmarks, _box_centre(box) - _box_centre(later.box))
+            found = _look_again(tracker, track, missed, region_around_box(box, REGION_GROW), expected,
+                                images[missed], labels_of, write_labels)
             if found is not None:
-                later, later_frame = found.box, missed
+                later, later_frame = found, missed
                 filled.append((track.index, missed))
     return filled
 
@@ -81,7 +86,7 @@ def look_before_start(tracker: Tracker, started: list[Track], frame_id: int, ima
         for earlier in range(frame_id - 1, frame_id - 1 - len(images), -1):
             if earlier not in images:
                 break
-            found = _look_again(tracker, track, earlier, region_around_box(box, REGION_GROW), images[earlier],
+            found = _look_again(tracker, track, earlier, region_around_box(box, REGION_GROW), None, images[earlier],
                                 labels_of, write_labels)
             if found is None:
                 break
@@ -90,16 +95,46 @@ def look_before_start(tracker: Tracker, started: list[Track], frame_id: int, ima
     return filled
 
 
-def _look_again(tracker: Tracker, track: Track, frame_id: int, region: Region, image: np.ndarray,
-                labels_of: Callable[[int], np.ndarray], write_labels: Callable[[int, np.ndarray], None]
-                ) -> Observation | None:
+def _moved(landmarks: PoseLandmarks, shift: np.ndarray) -> PoseLandmarks:
+    """``landmarks`` with their points moved by ``shift`` (2,) pixels."""
+    return replace(landmarks, points=landmarks.points + shift)
+
+
+def _box_centre(box: np.ndarray) -> np.ndarray:
+    """(2,) pixels: the centre of ``box`` (x0, y0, x1, y1)."""
+    return (box[:2] + box[2:]) / 2
+
+
+def _look_again(tracker: Tracker, track: Track, frame_id: int, region: Region, expected: PoseLandmarks | None,
+                image: np.ndarray, labels_of: Callable[[int], np.ndarray],
+                write_labels: Callable[[int, np.ndarray], None]) -> Observation | None:
     """:meth:`Tracker.look_again` for ``track`` in one earlier frame, the people of its labels painted over; what
-    is found takes the pixels of its segmentation that nobody holds there. Returns the observation or None."""
+    is found takes the pixels of its segmentation that nobody holds there. Where that finds nobody and the person
+    is ``expected`` somewhere (a track that saw them before: landmarks, else None), once more with the others'
+    pixels within ``mask_body_radius`` of that skeleton (if any) left as they are: the model, losing someone who
+    passes behind another person, often fits one skeleton over both, and that person's labels then hold the lost
+    one's pixels. What is found so must not be one of the people recorded in that frame (with their pixels left,
+    it may be them), and it also takes those of their pixels on its body. Not for a track that starts late: often a
+    second track on someone followed. Returns the observation or None."""
     labels = labels_of(frame_id)
     label = track.index + 1
-    found = tracker.look_again(image, region, (labels != 0) & (labels != label), track, frame_id)
+    others = (labels != 0) & (labels != label)
+    found = tracker.look_again(image, region, others, track, frame_id)
     if found is not None:
-        labels = labels.copy()
-        labels[found.mask & (labels == 0)] = label
-        write_labels(frame_id, labels)
+        taken = found.mask & (labels == 0)
+    elif expected is None:
+        return None
+    else:
+        spared = others & (skeleton_distance(expected, others.shape) < tracker.config.mask_body_radius)
+        if not spared.any():
+            return None
+        recorded = [t.keypoints[t.frames.index(frame_id)] for t in tracker.tracks
+                    if t is not track and frame_id in t.frames]
+        found = tracker.look_again(image, region, others & ~spared, track, frame_id, recorded)
+        if found is None:
+            return None
+        taken = found.mask & (labels == 0) | tracker.body_pixels(found) & spared
+    labels = labels.copy()
+    labels[taken] = label
+    write_labels(frame_id, labels)
     return found

@@ -38,7 +38,7 @@ class Observation:
     look: np.ndarray  # [2, D] appearance (glimpse.ingest.appearance)
     depth: float  # depth proxy, metres per pixel (larger = farther)
     keypoints: np.ndarray  # [17, 3] COCO-17 pixels and confidence (BlazePose's, or the ONNX pose model's)
-    body: np.ndarray | None = None  # [H, W] bool, Tracker._body_pixels, computed once when first needed
+    body: np.ndarray | None = None  # [H, W] bool, Tracker.body_pixels, computed once when first needed
     skeleton_distance: np.ndarray | None = None  # [H, W] float32 torso lengths, computed once when first needed
     image: np.ndarray | None = None  # [H, W, 3] the image the landmarks were found in (people painted over or not)
     legs_disputed: float = 0.0  # share of the model's mirrored runs that named the legs the other way
@@ -97,12 +97,19 @@ def same_person(a: PoseLandmarks, b: PoseLandmarks, config: IngestConfig) -> boo
     masks."""
     points_a, confidence_a = a.coco17()
     points_b, confidence_b = b.coco17()
-    both = (confidence_a > SAME_PERSON_CONFIDENCE) & (confidence_b > SAME_PERSON_CONFIDENCE)
+    return same_body_points(np.concatenate([points_a, confidence_a[:, None]], 1),
+                            np.concatenate([points_b, confidence_b[:, None]], 1),
+                            (torso_length(a) + torso_length(b)) / 2, config)
+
+
+def same_body_points(a: np.ndarray, b: np.ndarray, scale: float, config: IngestConfig) -> bool:
+    """:func:`same_person` on two people's COCO-17 keypoints ``a``, ``b`` [17, 3] (pixels, confidence), ``scale``
+    pixels per torso length."""
+    both = (a[:, 2] > SAME_PERSON_CONFIDENCE) & (b[:, 2] > SAME_PERSON_CONFIDENCE)
     confident_pairs = both.copy()
     if both.sum() < SAME_PERSON_MIN_POINTS:
         both = np.ones_like(both)
-    scale = (torso_length(a) + torso_length(b)) / 2
-    distance = np.linalg.norm(points_a - points_b, axis=1)
+    distance = np.linalg.norm(a[:, :2] - b[:, :2], axis=1)
     shared = np.count_nonzero(confident_pairs & (distance < config.track_shared_point_distance * scale))
     return bool(distance[both].mean() < config.track_same_person * scale or shared >= config.track_shared_points)
 

@@ -60,8 +60,10 @@ from glimpse.ingest.observation import (
     observed_skeleton_distance,
     one_person,
     part_of,
+    same_body_points,
     same_person,
     skeleton_distance,
+    torso_length,
 )
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
@@ -204,10 +206,10 @@ class Tracker:
         landmark model's run on it in the observation's region; the observation's own image and landmarks when no
         such pixel lies in the region or the model finds nobody there once they are painted."""
         own_distance = observed_skeleton_distance(observation)
-        own_body = self._body_pixels(observation)
+        own_body = self.body_pixels(observation)
         theirs = np.zeros(observation.mask.shape, bool)
         for other, spare_own in zip(others, in_front):
-            pixels = self._body_pixels(other) & (observed_skeleton_distance(other) <= own_distance)
+            pixels = self.body_pixels(other) & (observed_skeleton_distance(other) <= own_distance)
             theirs |= pixels & ~own_body if spare_own else pixels
         x0, y0, x1, y1 = np.round(observation.landmarks.region.box()).astype(int)
         height, width = theirs.shape
@@ -220,21 +222,25 @@ class Tracker:
             return observation.image, observation.landmarks
         return painted, landmarks
 
-    def look_again(self, image: np.ndarray, region: Region, others: np.ndarray, track: Track, frame_id: int
-                   ) -> Observation | None:
+    def look_again(self, image: np.ndarray, region: Region, others: np.ndarray, track: Track, frame_id: int,
+                   others_keypoints: list[np.ndarray] | None = None) -> Observation | None:
         """A frame the track missed, looked at again afterwards (glimpse.ingest.backfill): its person in ``region``
         with the people found there (``others`` [H, W] bool, their labels) painted over (:meth:`_painted_over`).
         Kept, and recorded in the track at ``frame_id`` (its state, which describes a later frame, unchanged),
-        only when it lies mostly off the others (``track_behind_max_overlap``) and looks like the track as a
-        re-identified person must (``track_reid_max_distance``); its keypoints are recorded as not seen when it
-        lies on the others more than ``track_backfill_keypoints_max_overlap`` (the model's guess at someone
-        mostly hidden)."""
+        only when it lies mostly off the others (``track_behind_max_overlap``), looks like the track as a
+        re-identified person must (``track_reid_max_distance``) and, given ``others_keypoints`` ([17, 3] each,
+        those recorded for the people found in that frame), is none of them (:func:`same_body_points`); its
+        keypoints are recorded as not seen when it lies on the others more than
+        ``track_backfill_keypoints_max_overlap`` (the model's guess at someone mostly hidden)."""
         config = self.config
         observation = self.observe(self._painted_over(image, others, others), region, image, others)
         if observation is None:
             return None
+        scale = torso_length(observation.landmarks)
         if (self._lies_on(observation, others, config.track_behind_max_overlap)
-                or not looks_like(track, observation, config.track_reid_max_distance)):
+                or not looks_like(track, observation, config.track_reid_max_distance)
+                or any(same_body_points(observation.keypoints, keypoints, scale, config)
+                       for keypoints in others_keypoints or [])):
             return None
         self.written_keypoints(image, observation)
         if self._lies_on(observation, others, config.track_backfill_keypoints_max_overlap):
@@ -277,7 +283,7 @@ class Tracker:
         return {t.index for t in live if t.index not in followed
                 and box_iou(t.predicted_region().box()[None], regions).max() > 0}
 
-    def _body_pixels(self, observation: Observation) -> np.ndarray:
+    def body_pixels(self, observation: Observation) -> np.ndarray:
         """[H, W] bool: the pixels of the observation's segmentation that lie on its own body (near its skeleton;
         the segmentation also covers other people in the crop)."""
         if observation.body is None:
@@ -286,10 +292,10 @@ class Tracker:
         return observation.body
 
     def _bodies(self, observations: list[Observation], shape: tuple[int, int]) -> np.ndarray:
-        """[H, W] bool: the union of the observations' body pixels (:meth:`_body_pixels`)."""
+        """[H, W] bool: the union of the observations' body pixels (:meth:`body_pixels`)."""
         union = np.zeros(shape, bool)
         for observation in observations:
-            union |= self._body_pixels(observation)
+            union |= self.body_pixels(observation)
         return union
 
     def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None) -> np.ndarray:
@@ -414,7 +420,7 @@ class Tracker:
         """Whether less than ``foreground_min_differing`` of the observation's body pixels differ from the plate in
         ``image``: what the landmark model fitted in a foreground region is something the plate shows (a painted
         pillar beside the person who made the foreground), not who made it."""
-        body = self._body_pixels(observation)
+        body = self.body_pixels(observation)
         if not body.any():
             return False
         differing = differs_from_plate(image[body], self.plate[body], self.config.foreground_threshold)
@@ -442,9 +448,9 @@ class Tracker:
         return self._lies_on(observation, others, max_overlap)
 
     def _lies_on(self, observation: Observation, pixels: np.ndarray, max_overlap: float) -> bool:
-        """Whether more than ``max_overlap`` of the observation's body pixels (:meth:`_body_pixels`) lie on
+        """Whether more than ``max_overlap`` of the observation's body pixels (:meth:`body_pixels`) lie on
         ``pixels`` [H, W] bool."""
-        body = self._body_pixels(observation)
+        body = self.body_pixels(observation)
         return np.count_nonzero(body & pixels) > max_overlap * max(np.count_nonzero(body), 1)
 
     def _assign(self, fresh: list[Observation], waiting: list[Track], frame_id: int) -> list[tuple[Track, Observation]]:
@@ -472,7 +478,7 @@ class Tracker:
 
     def _clear_of(self, observation: Observation, others: list[Observation]) -> bool:
         """Whether at most ``appearance_update_max_overlap`` of the observation's body pixels lie on the ``others``'
-        bodies (:meth:`_body_pixels`)."""
+        bodies (:meth:`body_pixels`)."""
         return not others or not self._lies_on(observation, self._bodies(others, observation.mask.shape),
                                                self.config.appearance_update_max_overlap)
 
