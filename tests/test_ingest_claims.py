@@ -202,6 +202,25 @@ def test_the_written_keypoints_see_the_other_people_painted_over(tracker: Tracke
     assert tracker.model.images == [] and np.array_equal(alone.keypoints, before)
 
 
+def test_someone_already_painted_over_where_a_person_was_found_is_not_taken_for_someone_standing_still(
+        tracker: Tracker) -> None:
+    """A person found behind another (the other painted over with the plate to find them) has that image as their
+    own; painting the other again for the written keypoints, their pixels there show the plate already, which is
+    not someone the plate holds (who is painted with the colour of their surroundings): the frame tells."""
+    tracker.config = replace(tracker.config, keypoint_crop_shifts=[], keypoints_paint_others=True,
+                             paint_still_with="surroundings")
+    tracker.plate = np.full((120, 400, 3), 255, np.uint8)
+    person, other = _on_canvas(_observation(100.0, 0.5), 90, 110), _on_canvas(_observation(150.0, 0.5), 140, 160)
+    frame = person.image.copy()  # black: nobody there is in the plate
+    person.image[other.mask] = 255  # found with the other painted over
+    tracker.model = _RecordingModel(person.landmarks)
+    tracker.written_keypoints(frame, person, [other])
+    (seen,) = tracker.model.images
+    assert (seen[other.mask] == 255).all() and (seen[person.mask] == 0).all()
+    still = tracker._painted_over(person.image, other.mask)  # the image alone says: someone standing still
+    assert (still[30:90, 145:155] < 255).all()  # (inside: the opening leaves the region's corners to the plate)
+
+
 @pytest.mark.parametrize("in_front", [True, False])
 def test_a_person_in_front_keeps_their_own_pixels_where_someone_behind_overlaps(tracker: Tracker,
                                                                                  in_front: bool) -> None:

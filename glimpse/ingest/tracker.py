@@ -183,7 +183,7 @@ class Tracker:
             return
         source, landmarks = observation.image, observation.landmarks
         if config.keypoints_paint_others and others:
-            source, landmarks = self._without_others(observation, others, in_front or [False] * len(others))
+            source, landmarks = self._without_others(image, observation, others, in_front or [False] * len(others))
         if config.keypoint_crop_shifts:
             points, observation.legs_disputed = self.model.median_points(
                 source, landmarks, tuple(config.keypoint_crop_shifts), config.landmark_refine_heatmap,
@@ -198,13 +198,15 @@ class Tracker:
         observation.keypoints = np.concatenate([points[list(COCO17_FROM_BLAZEPOSE)], named.coco17()[1][:, None]], 1)
         observation.relative3d = named.coco17_relative3d()
 
-    def _without_others(self, observation: Observation, others: list[Observation], in_front: list[bool]
-                        ) -> tuple[np.ndarray, PoseLandmarks]:
-        """(image, landmarks): the observation's image with the ``others``' body pixels nearer to their own skeleton
-        than to the observation's painted over (:meth:`_painted_over`), less the observation's own body pixels
-        where it is ``in_front`` of that other person (per other: their body does not hide this one's), and the
-        landmark model's run on it in the observation's region; the observation's own image and landmarks when no
-        such pixel lies in the region or the model finds nobody there once they are painted."""
+    def _without_others(self, frame: np.ndarray, observation: Observation, others: list[Observation],
+                        in_front: list[bool]) -> tuple[np.ndarray, PoseLandmarks]:
+        """(image, landmarks): the observation's image (``frame``, the frame it was found in, with whoever was
+        painted over to find it painted) with the ``others``' body pixels nearer to their own skeleton than to the
+        observation's painted over (:meth:`_painted_over`, told who stood still by ``frame``: pixels the image has
+        painted with the plate already show the plate, and are nobody standing still), less the observation's own
+        body pixels where it is ``in_front`` of that other person (per other: their body does not hide this one's),
+        and the landmark model's run on it in the observation's region; the observation's own image and landmarks
+        when no such pixel lies in the region or the model finds nobody there once they are painted."""
         own_distance = observed_skeleton_distance(observation)
         own_body = self.body_pixels(observation)
         theirs = np.zeros(observation.mask.shape, bool)
@@ -215,7 +217,7 @@ class Tracker:
         height, width = theirs.shape
         if not theirs[max(y0, 0):min(y1, height), max(x0, 0):min(x1, width)].any():
             return observation.image, observation.landmarks
-        painted = self._painted_over(observation.image, theirs, theirs | own_body)
+        painted = self._painted_over(observation.image, theirs, theirs | own_body, frame)
         landmarks = self.model.landmarks(painted, observation.landmarks.region, self.config.landmark_refine_heatmap,
                                          self.config.landmark_flip_average)
         if landmarks.score < self.config.landmark_min_presence:
@@ -298,27 +300,29 @@ class Tracker:
             union |= self.body_pixels(observation)
         return union
 
-    def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None) -> np.ndarray:
+    def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None,
+                      frame: np.ndarray | None = None) -> np.ndarray:
         """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and where there is no
-        plate, by the colour of their surroundings (:func:`surroundings_fill`). Where the plate shows what the image
-        shows (within ``foreground_threshold``, in regions at least STILL_WIDTH wide) a person stood still for most
-        of the video and painting them with the plate would paint them back: there, the colour of their
-        surroundings, or with ``paint_still_with: beside`` the plate's texture from beside them where it has some
-        (:func:`beside_fill`, from pixels where the frame shows the plate and that are not on ``people`` [H, W]
-        bool, the bodies of everyone found: nobody's texture is copied)."""
+        plate, by the colour of their surroundings (:func:`surroundings_fill`). Where the plate shows what the frame
+        shows (``frame``, default ``image``: the frame unpainted; within ``foreground_threshold``, in regions at
+        least STILL_WIDTH wide) a person stood still for most of the video and painting them with the plate would
+        paint them back: there, the colour of their surroundings, or with ``paint_still_with: beside`` the plate's
+        texture from beside them where it has some (:func:`beside_fill`, from pixels where the frame shows the plate
+        and that are not on ``people`` [H, W] bool, the bodies of everyone found: nobody's texture is copied)."""
+        frame = image if frame is None else frame
         painted = image.copy()
         to_fill = pixels
         still_px = round(STILL_WIDTH * image.shape[0])
         if self.plate is not None:
             painted[pixels] = self.plate[pixels]
             still = np.zeros_like(pixels)
-            still[pixels] = ~differs_from_plate(image[pixels], self.plate[pixels], self.config.foreground_threshold)
+            still[pixels] = ~differs_from_plate(frame[pixels], self.plate[pixels], self.config.foreground_threshold)
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (max(1, still_px),) * 2)
             to_fill = cv2.morphologyEx(still.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
         if to_fill.any():
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
             if self.plate is not None and self.config.paint_still_with == "beside":
-                blocked = pixels | differs_from_plate(image, self.plate, self.config.foreground_threshold)
+                blocked = pixels | differs_from_plate(frame, self.plate, self.config.foreground_threshold)
                 fill, given = beside_fill(self.plate, to_fill, still_px,
                                           blocked if people is None else blocked | people)
                 painted[given] = fill[given]
