@@ -211,12 +211,18 @@ def test_only_tracks_missing_at_most_the_backfill_frames_have_an_open_gap(tracke
     assert open_gaps(tracks, 0) == {}
 
 
-def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracker, monkeypatch) -> None:
-    look = np.full((2, 36), 1 / 36)
+def _started_at_5(tracker: Tracker, look: np.ndarray) -> Track:
+    """The tracker's only track, started at frame 5 (box centred at x = 140)."""
     started = _observation(140.0, look)
     track = Track(0, started.landmarks, look.copy())
     tracker.tracks = [track]
     tracker._update(track, started, 5)
+    return track
+
+
+def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracker, monkeypatch) -> None:
+    look = np.full((2, 36), 1 / 36)
+    track = _started_at_5(tracker, look)
     looked: list[tuple[int, float]] = []
 
     def observe(self, image, region, original=None, covered=None):  # the person walks 10 px right a frame
@@ -238,10 +244,7 @@ def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracke
 def test_a_track_started_late_does_not_look_a_second_time_past_the_others(tracker, monkeypatch) -> None:
     """Often a second track on someone followed: looking past them where they are would take their pixels."""
     look = np.full((2, 36), 1 / 36)
-    started = _observation(140.0, look)
-    track = Track(0, started.landmarks, look.copy())
-    tracker.tracks = [track]
-    tracker._update(track, started, 5)
+    track = _started_at_5(tracker, look)
     covered_seen: list[np.ndarray] = []
     monkeypatch.setattr(Tracker, "observe", _finding_at_the_centre(look, covered_seen))
     labels = {4: np.zeros(SIZE, np.uint16)}
