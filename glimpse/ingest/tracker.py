@@ -200,13 +200,14 @@ class Tracker:
 
     def _without_others(self, frame: np.ndarray, observation: Observation, others: list[Observation],
                         in_front: list[bool]) -> tuple[np.ndarray, PoseLandmarks]:
-        """(image, landmarks): the observation's image (``frame``, the frame it was found in, with whoever was
-        painted over to find it painted) with the ``others``' body pixels nearer to their own skeleton than to the
-        observation's painted over (:meth:`_painted_over`, told who stood still by ``frame``: pixels the image has
-        painted with the plate already show the plate, and are nobody standing still), less the observation's own
-        body pixels where it is ``in_front`` of that other person (per other: their body does not hide this one's),
-        and the landmark model's run on it in the observation's region; the observation's own image and landmarks
-        when no such pixel lies in the region or the model finds nobody there once they are painted."""
+        """(image, landmarks): the observation's image (the frame it was found in, with whoever was painted over to
+        find it painted) with the ``others``' body pixels nearer to their own skeleton than to the observation's
+        painted over (:meth:`_painted_over`, told who stood still by ``frame``, that frame unpainted: pixels the
+        image has painted with the plate already show the plate, and are nobody standing still), less the
+        observation's own body pixels where it is ``in_front`` of that other person (per other: their body does not
+        hide this one's), and the landmark model's run on it in the observation's region; the observation's own
+        image and landmarks when no such pixel lies in the region or the model finds nobody there once they are
+        painted."""
         own_distance = observed_skeleton_distance(observation)
         own_body = self.body_pixels(observation)
         theirs = np.zeros(observation.mask.shape, bool)
@@ -238,7 +239,7 @@ class Tracker:
         observation = self.observe(self._painted_over(image, others, others), region, image, others)
         if observation is None:
             return None
-        scale = torso_length(observation.landmarks)
+        scale = torso_length(observation.landmarks)  # pixels per torso length, to compare keypoints
         if (self._lies_on(observation, others, config.track_behind_max_overlap)
                 or not looks_like(track, observation, config.track_reid_max_distance)
                 or any(same_body_points(observation.keypoints, keypoints, scale, config)
