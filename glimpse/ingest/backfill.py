@@ -21,12 +21,12 @@ with the first look only (often it is a second track on someone followed).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from glimpse.ingest.blazepose import REGION_GROW, PoseLandmarks
-from glimpse.ingest.crop import Region, region_around_box
+from glimpse.ingest.crop import Region, box_centre, region_around_box
 from glimpse.ingest.observation import Observation, Track, skeleton_distance
 from glimpse.ingest.tracker import Tracker
 
@@ -65,7 +65,7 @@ def fill_gaps(tracker: Tracker, gaps: dict[int, Gap], observed: list[tuple[Track
                 continue
             weight = (missed - gap.last_frame) / (later_frame - gap.last_frame)
             box = (1 - weight) * gap.box + weight * later.box
-            expected = _moved(later.landmarks, _box_centre(box) - _box_centre(later.box))
+            expected = later.landmarks.moved(box_centre(box) - box_centre(later.box))
             found = _look_again(tracker, track, missed, region_around_box(box, REGION_GROW), expected,
                                 images[missed], labels_of, write_labels)
             if found is not None:
@@ -93,16 +93,6 @@ def look_before_start(tracker: Tracker, started: list[Track], frame_id: int, ima
             box = found.box
             filled.append((track.index, earlier))
     return filled
-
-
-def _moved(landmarks: PoseLandmarks, shift: np.ndarray) -> PoseLandmarks:
-    """``landmarks`` with their points moved by ``shift`` (2,) pixels."""
-    return replace(landmarks, points=landmarks.points + shift)
-
-
-def _box_centre(box: np.ndarray) -> np.ndarray:
-    """(2,) pixels: the centre of ``box`` (x0, y0, x1, y1)."""
-    return (box[:2] + box[2:]) / 2
 
 
 def _look_again(tracker: Tracker, track: Track, frame_id: int, region: Region, expected: PoseLandmarks | None,

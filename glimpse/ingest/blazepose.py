@@ -156,6 +156,10 @@ class PoseLandmarks:
     run_points: np.ndarray | None = None  # [R, 33, 2] image pixels of each run ``points`` averages (crop, mirror)
     legs_disputed: float = 0.0  # share of the mirrored runs that named the legs the other way (legs_named_otherwise())
 
+    def moved(self, shift: np.ndarray) -> PoseLandmarks:
+        """These landmarks with their points moved by ``shift`` (2,) pixels (the rest as they are)."""
+        return replace(self, points=self.points + shift)
+
     def coco17(self) -> tuple[np.ndarray, np.ndarray]:
         """([17, 2] pixels, [17] confidence = visibility x presence) in COCO-17 order."""
         index = list(COCO17_FROM_BLAZEPOSE)

@@ -70,10 +70,15 @@ def region_from_alignment(centre: np.ndarray, scale_point: np.ndarray, grow: flo
     return Region(np.asarray(centre, float), 2.0 * float(np.hypot(*delta)) * grow, float(angle))
 
 
+def box_centre(box: np.ndarray) -> np.ndarray:
+    """(2,) pixels: the centre of an axis-aligned box (x0, y0, x1, y1)."""
+    return (box[:2] + box[2:]) / 2
+
+
 def region_around_box(box: np.ndarray, grow: float) -> Region:
     """An upright square around an axis-aligned box (x0, y0, x1, y1), its longer side grown by ``grow``."""
     x0, y0, x1, y1 = box
-    return Region(np.array([(x0 + x1) / 2, (y0 + y1) / 2]), max(x1 - x0, y1 - y0) * grow, 0.0)
+    return Region(box_centre(np.asarray(box)), max(x1 - x0, y1 - y0) * grow, 0.0)
 
 
 def outside_image(points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

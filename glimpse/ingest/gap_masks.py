@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from glimpse.ingest.config import IngestConfig
+from glimpse.ingest.crop import box_centre
 from glimpse.ingest.foreground import unexplained_foreground
 from glimpse.ingest.report import PersonTrack
 
@@ -63,7 +64,7 @@ def interpolated_box(before: np.ndarray, after: np.ndarray, fraction: float, gro
     """(4,) x0, y0, x1, y1: the box ``fraction`` of the way from box ``before`` to box ``after`` (pixels), its sides
     times ``grow`` about its centre."""
     box = (1.0 - fraction) * np.asarray(before, float) + fraction * np.asarray(after, float)
-    centre, half = (box[:2] + box[2:]) / 2, grow * (box[2:] - box[:2]) / 2
+    centre, half = box_centre(box), grow * (box[2:] - box[:2]) / 2
     return np.concatenate([centre - half, centre + half])
 
 

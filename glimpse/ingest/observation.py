@@ -5,7 +5,7 @@ depth proxy, the skeleton that decides contested pixels. Pure functions of landm
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -71,7 +71,7 @@ class Track:
 
     def predicted_landmarks(self) -> PoseLandmarks:
         """The last landmarks moved on by the track's velocity to this frame."""
-        return replace(self.landmarks, points=self.landmarks.points + self.velocity * (1 + self.missing))
+        return self.landmarks.moved(self.velocity * (1 + self.missing))
 
 
 def depth_proxy(landmarks: PoseLandmarks) -> float:

@@ -47,7 +47,7 @@ from glimpse.ingest.appearance import appearance, appearance_distance, blend
 from glimpse.ingest.blazepose import COCO17_FROM_BLAZEPOSE, BlazePose, PoseLandmarks, box_iou
 from glimpse.ingest.claims import drop_lookalikes, reclaim, return_refound
 from glimpse.ingest.config import IngestConfig
-from glimpse.ingest.crop import Region, outside_image, paste_to_image
+from glimpse.ingest.crop import Region, box_centre, outside_image, paste_to_image
 from glimpse.ingest.depth_order import nearness_rank
 from glimpse.ingest.detection import detector_regions
 from glimpse.ingest.foreground import beside_fill, differs_from_plate, foreground_candidates, surroundings_fill
@@ -497,7 +497,7 @@ class Tracker:
             step = landmarks.next_region.centre - track.region.centre
             track.velocity = (1 - VELOCITY_SMOOTHING) * track.velocity + VELOCITY_SMOOTHING * step / (1 + track.missing)
             previous = track.boxes[-1]
-            jump = np.linalg.norm((observation.box[:2] + observation.box[2:]) / 2 - (previous[:2] + previous[2:]) / 2)
+            jump = np.linalg.norm(box_centre(observation.box) - box_centre(previous))
             if jump > config.track_switch_distance * max(previous[3] - previous[1], 1.0) * (1 + track.missing):
                 track.jumps.append(frame_id)
         track.landmarks = landmarks
