@@ -221,6 +221,32 @@ def test_someone_already_painted_over_where_a_person_was_found_is_not_taken_for_
     assert (still[30:90, 145:155] < 255).all()  # (inside: the opening leaves the region's corners to the plate)
 
 
+def test_the_written_keypoints_see_someone_who_stood_still_painted_with_the_plates_texture_from_beside_them(
+        tracker: Tracker) -> None:
+    """Someone the plate shows (they stood still) is painted for the written keypoints' runs as
+    ``keypoints_paint_still_with`` says, for tracking as ``paint_still_with`` says: with beside and surroundings,
+    the runs see the plate's texture from beside them, tracking a flat patch of the surroundings' colour."""
+    tracker.config = replace(tracker.config, keypoint_crop_shifts=[], keypoints_paint_others=True,
+                             paint_still_with="surroundings", keypoints_paint_still_with="beside")
+    texture = np.zeros((120, 400, 3), np.uint8)
+    texture[:, :, 0] = (np.arange(400) * 7 % 256)[None]  # says where each pixel came from
+    texture[:, :, 1] = np.arange(120)[:, None]
+    person, other = _on_canvas(_observation(100.0, 0.5), 90, 110), _on_canvas(_observation(150.0, 0.5), 140, 160)
+    frame = texture.copy()
+    frame[person.mask | other.mask] = (20, 200, 20)
+    tracker.plate = frame.copy()  # both stood still all video
+    person.image = frame.copy()
+    tracker.model = _RecordingModel(person.landmarks)
+    tracker.written_keypoints(frame, person, [other])
+    (seen,) = tracker.model.images
+    margin = round(0.02 * 120)  # the tracker's margin: STILL_WIDTH of the frame's height
+    # from one region's width (20 px) plus the margin to the left (both sides clear: a tie goes left)
+    assert np.array_equal(seen[30:90, 145:155], texture[30:90, 125 - margin:135 - margin])
+    assert (seen[person.mask] == (20, 200, 20)).all()
+    tracked = tracker._painted_over(frame, other.mask)
+    assert np.ptp(tracked[30:90, 145:155].reshape(-1, 3)[:, 0]) < np.ptp(seen[30:90, 145:155].reshape(-1, 3)[:, 0])
+
+
 @pytest.mark.parametrize("in_front", [True, False])
 def test_a_person_in_front_keeps_their_own_pixels_where_someone_behind_overlaps(tracker: Tracker,
                                                                                  in_front: bool) -> None:

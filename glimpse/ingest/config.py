@@ -86,6 +86,7 @@ class IngestConfig:
     keypoint_crop_shifts: list[float]
     keypoint_rename_ratio: float
     keypoints_paint_others: bool
+    keypoints_paint_still_with: Literal["surroundings", "beside"]
     fit_size_sigma: float
     fit_keypoint_noise_m: float
     fit_unseen_limbs_at_rest: bool

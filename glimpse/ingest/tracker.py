@@ -203,11 +203,11 @@ class Tracker:
         """(image, landmarks): the observation's image (the frame it was found in, with whoever was painted over to
         find it painted) with the ``others``' body pixels nearer to their own skeleton than to the observation's
         painted over (:meth:`_painted_over`, told who stood still by ``frame``, that frame unpainted: pixels the
-        image has painted with the plate already show the plate, and are nobody standing still), less the
-        observation's own body pixels where it is ``in_front`` of that other person (per other: their body does not
-        hide this one's), and the landmark model's run on it in the observation's region; the observation's own
-        image and landmarks when no such pixel lies in the region or the model finds nobody there once they are
-        painted."""
+        image has painted with the plate already show the plate, and are nobody standing still; who did is painted
+        as ``keypoints_paint_still_with`` says), less the observation's own body pixels where it is ``in_front`` of
+        that other person (per other: their body does not hide this one's), and the landmark model's run on it in
+        the observation's region; the observation's own image and landmarks when no such pixel lies in the region
+        or the model finds nobody there once they are painted."""
         own_distance = observed_skeleton_distance(observation)
         own_body = self.body_pixels(observation)
         theirs = np.zeros(observation.mask.shape, bool)
@@ -218,7 +218,8 @@ class Tracker:
         height, width = theirs.shape
         if not theirs[max(y0, 0):min(y1, height), max(x0, 0):min(x1, width)].any():
             return observation.image, observation.landmarks
-        painted = self._painted_over(observation.image, theirs, theirs | own_body, frame)
+        painted = self._painted_over(observation.image, theirs, theirs | own_body, frame,
+                                     self.config.keypoints_paint_still_with)
         landmarks = self.model.landmarks(painted, observation.landmarks.region, self.config.landmark_refine_heatmap,
                                          self.config.landmark_flip_average)
         if landmarks.score < self.config.landmark_min_presence:
@@ -302,15 +303,17 @@ class Tracker:
         return union
 
     def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None,
-                      frame: np.ndarray | None = None) -> np.ndarray:
+                      frame: np.ndarray | None = None, still_with: str | None = None) -> np.ndarray:
         """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and where there is no
         plate, by the colour of their surroundings (:func:`surroundings_fill`). Where the plate shows what the frame
         shows (``frame``, default ``image``: the frame unpainted; within ``foreground_threshold``, in regions at
         least STILL_WIDTH wide) a person stood still for most of the video and painting them with the plate would
-        paint them back: there, the colour of their surroundings, or with ``paint_still_with: beside`` the plate's
-        texture from beside them where it has some (:func:`beside_fill`, from pixels where the frame shows the plate
-        and that are not on ``people`` [H, W] bool, the bodies of everyone found: nobody's texture is copied)."""
+        paint them back: there, the colour of their surroundings, or with ``still_with`` (default
+        ``paint_still_with``) ``beside`` the plate's texture from beside them where it has some (:func:`beside_fill`,
+        from pixels where the frame shows the plate and that are not on ``people`` [H, W] bool, the bodies of
+        everyone found: nobody's texture is copied)."""
         frame = image if frame is None else frame
+        still_with = self.config.paint_still_with if still_with is None else still_with
         painted = image.copy()
         to_fill = pixels
         still_px = round(STILL_WIDTH * image.shape[0])
@@ -322,7 +325,7 @@ class Tracker:
             to_fill = cv2.morphologyEx(still.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
         if to_fill.any():
             painted[to_fill] = surroundings_fill(image, pixels)[to_fill]
-            if self.plate is not None and self.config.paint_still_with == "beside":
+            if self.plate is not None and still_with == "beside":
                 blocked = pixels | differs_from_plate(frame, self.plate, self.config.foreground_threshold)
                 fill, given = beside_fill(self.plate, to_fill, still_px,
                                           blocked if people is None else blocked | people)
