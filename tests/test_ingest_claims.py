@@ -16,7 +16,7 @@ from glimpse.ingest.claims import drop_lookalikes, return_refound
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
 from glimpse.ingest.observation import Observation, Track, observed_skeleton_distance
-from glimpse.ingest.tracker import Tracker
+from glimpse.ingest.tracker import STILL_WIDTH, Tracker
 
 BOX_HEIGHT = 80.0
 
@@ -239,7 +239,7 @@ def test_the_written_keypoints_see_someone_who_stood_still_painted_with_the_plat
     tracker.model = _RecordingModel(person.landmarks)
     tracker.written_keypoints(frame, person, [other])
     (seen,) = tracker.model.images
-    margin = round(0.02 * 120)  # the tracker's margin: STILL_WIDTH of the frame's height
+    margin = round(STILL_WIDTH * 120)  # the tracker's margin
     # from one region's width (20 px) plus the margin to the left (both sides clear: a tie goes left)
     assert np.array_equal(seen[30:90, 145:155], texture[30:90, 125 - margin:135 - margin])
     assert (seen[person.mask] == (20, 200, 20)).all()

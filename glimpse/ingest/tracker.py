@@ -38,6 +38,7 @@ skeleton passes close to it, else to the closest skeleton.
 from __future__ import annotations
 
 import bisect
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -303,7 +304,8 @@ class Tracker:
         return union
 
     def _painted_over(self, image: np.ndarray, pixels: np.ndarray, people: np.ndarray | None = None,
-                      frame: np.ndarray | None = None, still_with: str | None = None) -> np.ndarray:
+                      frame: np.ndarray | None = None,
+                      still_with: Literal["surroundings", "beside"] | None = None) -> np.ndarray:
         """A copy of ``image`` with ``pixels`` [H, W] bool replaced by the background plate, and where there is no
         plate, by the colour of their surroundings (:func:`surroundings_fill`). Where the plate shows what the frame
         shows (``frame``, default ``image``: the frame unpainted; within ``foreground_threshold``, in regions at
