@@ -221,6 +221,7 @@ def _started_at_5(tracker: Tracker, look: np.ndarray) -> Track:
 
 
 def test_a_track_started_late_looks_back_until_a_frame_without_its_person(tracker, monkeypatch) -> None:
+    tracker.config = replace(tracker.config, track_look_back_misses=0)
     look = np.full((2, 36), 1 / 36)
     track = _started_at_5(tracker, look)
     looked: list[tuple[int, float]] = []
@@ -253,3 +254,32 @@ def test_a_track_started_late_does_not_look_a_second_time_past_the_others(tracke
     filled = look_before_start(tracker, [track], 5, images, lambda f: labels[f],
                                lambda f, new: labels.__setitem__(f, new))
     assert len(covered_seen) == 1 and filled == [] and (labels[4][:, 100:] == 7).all()
+
+
+@pytest.mark.parametrize("misses, frames", [(2, [0, 1, 4, 5]), (1, [4, 5])])
+def test_a_track_started_late_looks_back_past_frames_where_its_person_was_hidden(tracker, monkeypatch, misses: int,
+                                                                                 frames: list[int]) -> None:
+    """Someone standing still whom a passer-by hid in frames 2-3: the look goes on past at most
+    track_look_back_misses frames in a row without them, in the region of the last frame where they were found."""
+    tracker.config = replace(tracker.config, track_look_back_misses=misses)
+    look = np.full((2, 36), 1 / 36)
+    track = _started_at_5(tracker, look)
+    looked: list[tuple[int, float]] = []
+
+    def observe(self, image, region, original=None, covered=None):
+        frame = int(image[0, 0, 0])
+        looked.append((frame, float(region.centre[0])))
+        return None if frame in (2, 3) else _observation(140.0 - 2.0 * (5 - frame), look)
+
+    monkeypatch.setattr(Tracker, "observe", observe)
+    images = {f: np.full(SIZE + (3,), f, np.uint8) for f in range(5)}
+    labels = {f: np.zeros(SIZE, np.uint16) for f in images}
+    filled = look_before_start(tracker, [track], 5, images, lambda f: labels[f],
+                               lambda f, new: labels.__setitem__(f, new))
+    assert track.frames == frames and [f for _, f in filled] == frames[-2::-1]
+    regions = {frame: centre for frame, centre in looked}
+    assert regions[3] == pytest.approx(138.0) and regions[2] == pytest.approx(138.0)  # frame 4's find
+    if misses == 2:
+        assert regions[1] == pytest.approx(138.0) and regions[0] == pytest.approx(132.0) and (labels[1] == 1).any()
+    else:
+        assert 1 not in regions and not labels[1].any()

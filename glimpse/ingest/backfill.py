@@ -14,8 +14,9 @@ skeleton over both, whose labels then hold the lost one's pixels). What is found
 of looking behind someone (mostly off the others' pixels, looking like the track as a re-identified person must);
 it is given the pixels of its segmentation that nobody found in that frame holds (whoever a track lost was behind
 them), and nothing is invented for frames where the person stays hidden. A track that starts late (someone
-entering, or first seen from behind) looks back the same way, frame by frame, until a frame without its person,
-with the first look only (often it is a second track on someone followed).
+entering, first seen from behind, or standing where a passer-by hid them) looks back the same way, frame by frame,
+past at most ``track_look_back_misses`` frames in a row without its person, with the first look only (often it is a
+second track on someone followed).
 """
 
 from __future__ import annotations
@@ -78,19 +79,23 @@ def look_before_start(tracker: Tracker, started: list[Track], frame_id: int, ima
                       labels_of: Callable[[int], np.ndarray],
                       write_labels: Callable[[int, np.ndarray], None]) -> list[tuple[int, int]]:
     """Every track ``started`` at ``frame_id`` looks back at the frames before it held in ``images``, each in the
-    region around its box in the frame after (a person moves little between two frames), until a frame where it
-    does not find its person (found late: entering, or first seen from behind). The rest as :func:`fill_gaps`."""
+    region around its box in the nearest later frame where it was found (a person moves little between two frames),
+    until more than ``track_look_back_misses`` frames in a row without its person (found late: entering, first seen
+    from behind, or standing where someone passing hid them). The rest as :func:`fill_gaps`."""
     filled = []
     for track in started:
-        box = track.boxes[0]
+        box, misses = track.boxes[0], 0
         for earlier in range(frame_id - 1, frame_id - 1 - len(images), -1):
             if earlier not in images:
                 break
             found = _look_again(tracker, track, earlier, region_around_box(box, REGION_GROW), None, images[earlier],
                                 labels_of, write_labels)
             if found is None:
-                break
-            box = found.box
+                misses += 1
+                if misses > tracker.config.track_look_back_misses:
+                    break
+                continue
+            box, misses = found.box, 0
             filled.append((track.index, earlier))
     return filled
 

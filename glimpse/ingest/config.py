@@ -50,6 +50,7 @@ class IngestConfig:
     track_drop_lookalikes: bool
     track_backfill_frames: int
     track_backfill_keypoints_max_overlap: float
+    track_look_back_misses: int
     track_min_frames: int
     track_min_height: float
     track_max_upside_down: float
