@@ -44,13 +44,13 @@ from glimpse.body.keypoints import keypoint_map
 from glimpse.body.model import BodyModel
 from glimpse.fixtures.mesh_render import Mesh, render_meshes
 from glimpse.fixtures.scenes import FREE_BODY, make_scene
+from glimpse.ingest.behind import region_from_keypoints
 from glimpse.ingest.blazepose import REGION_GROW, BlazePose
 from glimpse.ingest.config import IngestConfig, load_ingest_config
-from glimpse.ingest.crop import Region, region_from_alignment
+from glimpse.ingest.crop import Region
 from glimpse.ingest.evaluate import (HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, mask_iou, pck,
                                      score_people)
 from glimpse.ingest.mask_snap import snapped_masks
-from glimpse.ingest.sides import HIPS, SHOULDERS
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_pose
 from glimpse.ingest.tracker import Tracker, recorded_keypoints
@@ -63,7 +63,6 @@ SCENARIOS = ("demo", "crowd", "moving_camera", "lower_body_occluded", "adult_chi
 PCK_FRACTION = 0.1
 JOINT_MASK_REACH_PX = 2  # a joint counts as visible when the person's visible mask is within this many pixels
 OWN_BODY_MARGIN_M = 0.05  # a joint is behind its own body when deeper than this past its own skin (clothing, curvature)
-HEAD_TOP_REACH = 1.15  # the top of the head (or a raised hand's end) from the mid hip, per the farthest COCO-17 point
 
 
 def true_people(scene_dir: Path, layouts: tuple[str, ...]) -> dict[str, dict[int, dict[str, TruePerson]]]:
@@ -151,12 +150,9 @@ def fixture_video(scenario: str, size: str, seed: int, work: Path) -> tuple[Path
 
 def reference_region(joints: np.ndarray) -> Region:
     """The landmark model's region for a person whose COCO-17 points [17, 2] (pixels, hidden ones too) are known,
-    as MediaPipe's alignment places it: centred on the mid hip, the mid shoulder up, its half side the farthest
-    point's distance from the mid hip times HEAD_TOP_REACH, grown as the model's crop is."""
-    hips, shoulders = joints[list(HIPS)].mean(0), joints[list(SHOULDERS)].mean(0)
-    up = (shoulders - hips) / max(float(np.linalg.norm(shoulders - hips)), 1e-6)
-    reach = float(np.linalg.norm(joints - hips, axis=1).max()) * HEAD_TOP_REACH
-    return region_from_alignment(hips, hips + up * reach, REGION_GROW)
+    as MediaPipe's alignment places it (glimpse.ingest.behind.region_from_keypoints, every point counted), grown
+    as the model's crop is."""
+    return region_from_keypoints(joints, np.ones(len(joints), bool), REGION_GROW)
 
 
 class ModelReference(NamedTuple):

@@ -425,6 +425,7 @@ def test_a_static_video_with_a_focal_length_gets_cameras_json(demo_video, tmp_pa
 
 
 def test_the_reference_region_is_mediapipes_alignment_square() -> None:
+    from glimpse.ingest.behind import HEAD_TOP_REACH
     from glimpse.ingest.blazepose import REGION_GROW
     from glimpse.ingest.crop import crop_to_image
 
@@ -433,7 +434,7 @@ def test_the_reference_region_is_mediapipes_alignment_square() -> None:
     joints = np.array([[0, -160], [8, -168], [-8, -168], [16, -164], [-16, -164], [40, -100], [-40, -100],
                        [50, -50], [-50, -50], [55, 0], [-55, 0], [20, 0], [-20, 0], [22, 80], [-22, 80],
                        [24, 160], [-24, 160]], float)
-    side = 2 * np.hypot(8, 168) * bench.HEAD_TOP_REACH * REGION_GROW
+    side = 2 * np.hypot(8, 168) * HEAD_TOP_REACH * REGION_GROW
     for turn in (0.0, 0.5):  # radians, the person leaning over
         rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
         region = bench.reference_region(joints @ rotation.T + [300, 200])

@@ -103,6 +103,9 @@ class IngestConfig:
     border_squeeze_margin: float
     border_squeeze_window_s: float
     hide_joints_on_others: bool
+    keypoints_behind_again: bool
+    keypoints_behind_min_cover: float
+    keypoints_behind_max_frames: int
     appearance_bins: int
     appearance_update: float
     appearance_update_max_overlap: float

@@ -40,6 +40,8 @@ class PersonTrack:
     legs_exchanged: list[int] = field(default_factory=list)  # frame ids whose knees and ankles were exchanged
     looked_again: list[int] = field(default_factory=list)  # frame ids the track had missed, filled afterwards
     masks_from_foreground: list[int] = field(default_factory=list)  # frame ids with a mask and no keypoints
+    keypoints_behind: list[int] = field(default_factory=list)  # frame ids whose keypoints were looked for again
+    #                                                            behind someone (glimpse.ingest.behind)
 
 
 def person_colour(k: int) -> tuple[int, int, int]:
@@ -106,6 +108,7 @@ def tracks_report(people: list[PersonTrack], dropped: dict, facts: dict) -> dict
             "legs_exchanged": person.legs_exchanged,
             "looked_again": person.looked_again,
             "masks_from_foreground": person.masks_from_foreground,
+            "keypoints_behind": person.keypoints_behind,
             "suspected_switches": [{"frame": f, "why": "re-identified after a gap", "appearance_distance": round(d, 3)}
                                    for f, d in person.reidentified]
                                   + [{"frame": f, "why": "the box jumped"} for f in person.jumps],

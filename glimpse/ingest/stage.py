@@ -42,6 +42,7 @@ import numpy as np
 from glimpse.config import REPO_ROOT
 from glimpse.errors import GlimpseError
 from glimpse.ingest.backfill import fill_gaps, look_before_start, open_gaps
+from glimpse.ingest.behind import behind_plan, with_keypoints
 from glimpse.ingest.blazepose import BlazePose
 from glimpse.ingest.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from glimpse.ingest.config import SCENE_UNCHANGED_BY, IngestConfig
@@ -123,6 +124,12 @@ def _chosen_frames(path: Path, survey: Survey, desc: str) -> Iterator[tuple[int,
 def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     """[..., 2] tracking-size pixel coordinates -> scene-size ones (pixel centres kept)."""
     ratio = np.array([survey.width / survey.track_width, survey.height / survey.track_height])
+    return (points + 0.5) * ratio - 0.5
+
+
+def _to_tracking_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
+    """[..., 2] scene-size pixel coordinates -> tracking-size ones (the inverse of :func:`_to_scene_pixels`)."""
+    ratio = np.array([survey.track_width / survey.width, survey.track_height / survey.height])
     return (points + 0.5) * ratio - 0.5
 
 
@@ -246,6 +253,29 @@ def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: li
                     additions.setdefault(frame_id, []).append((person.label, np.flatnonzero(mine)))
                     added[person.pid][frame_id] = _to_scene_pixels(mask_box(mine).reshape(2, 2), survey).reshape(4)
     return [with_mask_frames(person, added[person.pid]) for person in people], additions
+
+
+def _keypoints_behind(video: Path, survey: Survey, tracker: Tracker, people: list[PersonTrack],
+                      labels_of: Callable[[int], np.ndarray]) -> list[PersonTrack]:
+    """``people`` with their keypoints looked for again where they were behind someone (glimpse.ingest.behind),
+    the frames decoded once more (only when someone was)."""
+    plan = behind_plan(people, labels_of, partial(_to_tracking_pixels, survey=survey), tracker.config)
+    if not plan:
+        return people
+    track_size = (survey.track_width, survey.track_height)
+    for frame_id, rgb in _chosen_frames(video, survey, "keypoints behind others"):
+        if frame_id not in plan:
+            continue
+        image, labels = resized(rgb, track_size), labels_of(frame_id)
+        for index, region in plan[frame_id]:
+            found = tracker.keypoints_behind(image, labels, people[index].label, region)
+            if found is None:
+                continue
+            keypoints, relative3d = found
+            seen = keypoints[:, 2:] > 0
+            keypoints[:, :2] = np.where(seen, _to_scene_pixels(keypoints[:, :2], survey), 0.0)
+            people[index] = with_keypoints(people[index], frame_id, keypoints, relative3d)
+    return people
 
 
 def _labels_with(work: Path, additions: dict[int, list[tuple[int, np.ndarray]]], frame_id: int) -> np.ndarray:
@@ -452,6 +482,8 @@ def _track_and_write(video: Path, survey: Survey, config: IngestConfig, writer: 
     if config.gap_masks and survey.plate is not None:
         people, additions = _masks_in_gaps(video, survey, config, people, work)
     labels_of = partial(_labels_with, work, additions)
+    if config.keypoints_behind_again:
+        people = _keypoints_behind(video, survey, tracker, people, labels_of)
     if survey.focal_35mm is not None:  # a moving camera's too: SfM keeps it (01_sfm.estimate_focal: its own)
         writer.input_cameras(survey.width, survey.height,
                              intrinsics_from_focal(survey.focal_35mm, survey.width, survey.height))

@@ -66,6 +66,7 @@ from glimpse.ingest.observation import (
     skeleton_distance,
     torso_length,
 )
+from glimpse.ingest.occlusion import NOBODY, joints_on_others
 from glimpse.ingest.onnx_models import OnnxDetector, OnnxPose
 
 VELOCITY_SMOOTHING = 0.5  # weight of the newest displacement in a track's velocity
@@ -253,6 +254,27 @@ class Tracker:
         self._record(track, observation, frame_id)
         track.looked_again.append(frame_id)
         return observation
+
+    def keypoints_behind(self, image: np.ndarray, labels: np.ndarray, label: int, region: Region
+                         ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(keypoints [17, 3] as recorded, 3D points [17, 4] as recorded) of the person ``label`` of ``labels``
+        [H, W] (the final depth-ordered labels of ``image``) looked for in ``region`` with every other person's
+        pixels painted over as for the written keypoints (glimpse.ingest.behind), joints on those pixels written as
+        not seen; None when the model finds nobody there."""
+        config = self.config
+        people = labels != NOBODY
+        others = people & (labels != label)
+        painted = self._painted_over(image, others, people, image, config.keypoints_paint_still_with)
+        observation = self.observe(painted, region)
+        if observation is None:
+            return None
+        self.written_keypoints(painted, observation)
+        keypoints = recorded_keypoints(observation.keypoints, labels.shape, config.keypoint_min_confidence)
+        keypoints[joints_on_others(keypoints[:, :2], labels, label)] = 0.0
+        relative = (observation.relative3d if observation.relative3d is not None
+                    else observation.landmarks.coco17_relative3d())
+        confidence = keypoints[:, 2:]
+        return keypoints, np.concatenate([np.where(confidence > 0, relative, 0.0), confidence], 1)
 
     def _resolve_duplicates(self, followed: dict[int, Observation]) -> list[int]:
         """Of two observations of one person drop the piece (a part taken for a person), or the one whose
