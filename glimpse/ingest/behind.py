@@ -69,7 +69,7 @@ def feet_rows(bottoms: dict[int, float], frame_id: int, window: int) -> float | 
     ``frame_id``, None when none is known: who stands nearer on one floor (their feet lower in the image), as the
     depth-ordered masks rank people, over a window (a hidden person's mask can reach down over the front person's
     legs for a few frames)."""
-    rows = [row for frame, row in bottoms.items() if abs(frame - frame_id) <= window]
+    rows = [bottoms[frame] for frame in range(frame_id - window, frame_id + window + 1) if frame in bottoms]
     return float(np.median(rows)) if rows else None
 
 

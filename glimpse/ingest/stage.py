@@ -127,6 +127,12 @@ def _to_scene_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
+def _keypoints_to_scene_pixels(keypoints: np.ndarray, survey: Survey) -> np.ndarray:
+    """[..., 3] tracking-size keypoints (pixels, confidence) -> scene-size ones, missing ones (confidence 0) at 0."""
+    found = keypoints[..., 2:] > 0
+    return np.concatenate([np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0), keypoints[..., 2:]], -1)
+
+
 def _to_tracking_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     """[..., 2] scene-size pixel coordinates -> tracking-size ones (the inverse of :func:`_to_scene_pixels`)."""
     ratio = np.array([survey.track_width / survey.width, survey.track_height / survey.height])
@@ -189,8 +195,7 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
             keypoints[..., 2][hidden] = 0.0
             relative3d[..., 3][hidden] = 0.0
         keypoints = smooth_keypoints(frames, keypoints, config.keypoint_smoothing_frames)
-        found = keypoints[..., 2:] > 0
-        keypoints[..., :2] = np.where(found, _to_scene_pixels(keypoints[..., :2], survey), 0.0)
+        keypoints = _keypoints_to_scene_pixels(keypoints, survey)
         boxes = _to_scene_pixels(track_boxes.reshape(-1, 2, 2), survey).reshape(-1, 4)
         relative3d = smooth_keypoints(frames, relative3d, config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
@@ -272,9 +277,8 @@ def _keypoints_behind(video: Path, survey: Survey, tracker: Tracker, people: lis
             if found is None:
                 continue
             keypoints, relative3d = found
-            seen = keypoints[:, 2:] > 0
-            keypoints[:, :2] = np.where(seen, _to_scene_pixels(keypoints[:, :2], survey), 0.0)
-            people[index] = with_keypoints(people[index], frame_id, keypoints, relative3d)
+            people[index] = with_keypoints(people[index], frame_id, _keypoints_to_scene_pixels(keypoints, survey),
+                                           relative3d)
     return people
 
 

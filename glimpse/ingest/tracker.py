@@ -85,6 +85,14 @@ def recorded_keypoints(keypoints: np.ndarray, shape: tuple[int, int], min_confid
     return np.concatenate([np.where(confidence[:, None] > 0, points, 0.0), confidence[:, None]], 1)
 
 
+def recorded_relative3d(observation: Observation, confidence: np.ndarray) -> np.ndarray:
+    """[17, 4]: the observation's metric 3D points written beside its keypoints (those the written keypoints' runs
+    named, else its landmarks'), zero where ``confidence`` [17] (the recorded keypoints') is 0, and that confidence."""
+    relative = (observation.relative3d if observation.relative3d is not None
+                else observation.landmarks.coco17_relative3d())
+    return np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0), confidence[:, None]], 1)
+
+
 class Tracker:
     """Runs the per-frame steps of the module docstring; ``tracks`` holds every track ever started."""
 
@@ -271,10 +279,7 @@ class Tracker:
         self.written_keypoints(painted, observation)
         keypoints = recorded_keypoints(observation.keypoints, labels.shape, config.keypoint_min_confidence)
         keypoints[joints_on_others(keypoints[:, :2], labels, label)] = 0.0
-        relative = (observation.relative3d if observation.relative3d is not None
-                    else observation.landmarks.coco17_relative3d())
-        confidence = keypoints[:, 2:]
-        return keypoints, np.concatenate([np.where(confidence > 0, relative, 0.0), confidence], 1)
+        return keypoints, recorded_relative3d(observation, keypoints[:, 2])
 
     def _resolve_duplicates(self, followed: dict[int, Observation]) -> list[int]:
         """Of two observations of one person drop the piece (a part taken for a person), or the one whose
@@ -538,13 +543,9 @@ class Tracker:
         confidence 0), 3D landmarks, box and legs' dispute to the track's per-frame lists, in frame order."""
         keypoints = recorded_keypoints(observation.keypoints, observation.mask.shape,
                                        self.config.keypoint_min_confidence)
-        confidence = keypoints[:, 2]
         at = bisect.bisect(track.frames, frame_id)
         track.frames.insert(at, frame_id)
         track.keypoints.insert(at, keypoints)
-        relative = (observation.relative3d if observation.relative3d is not None
-                    else observation.landmarks.coco17_relative3d())
-        track.relative3d.insert(at, np.concatenate([np.where(confidence[:, None] > 0, relative, 0.0),
-                                                    confidence[:, None]], 1))
+        track.relative3d.insert(at, recorded_relative3d(observation, keypoints[:, 2]))
         track.boxes.insert(at, observation.box)
         track.legs_disputed.insert(at, observation.legs_disputed)
