@@ -82,6 +82,17 @@ def test_runs_behind_someone_need_a_region_on_both_sides(covered_frames, ends, f
     assert behind_runs(frames, covered_frames, ends, 3) == runs
 
 
+@pytest.mark.parametrize("covered_frames, frames, after, runs", [
+    ({5, 6}, list(range(21)), 2, [(5, 8)]),  # the two frames after the last covered one too
+    ({5, 6}, list(range(21)), 0, [(5, 6)]),
+    ({5, 9}, list(range(21)), 3, [(5, 12)]),  # frames 6-8 join the two covered frames into one run
+    ({5, 6}, [f for f in range(21) if f != 8], 2, []),  # frame 8 is not the person's: no frame to end at
+    ({5, 6}, list(range(21)), 8, []),  # 5-14 is longer than max_frames
+])
+def test_runs_behind_someone_go_on_for_the_frames_after(covered_frames, frames, after, runs) -> None:
+    assert behind_runs(frames, covered_frames, set(frames), 9, after) == runs
+
+
 def _person(pid: str, label: int, frames: list[int], keypoints: np.ndarray) -> PersonTrack:
     count = len(frames)
     return PersonTrack(pid, label, frames, keypoints, np.zeros((count, 17, 4)), np.zeros((count, 4)), [], [])
@@ -89,9 +100,10 @@ def _person(pid: str, label: int, frames: list[int], keypoints: np.ndarray) -> P
 
 def test_the_plan_interpolates_the_region_of_the_person_behind_between_the_frames_around() -> None:
     """Person 1 (feet at row 80) walks right from x = 40 behind person 2 (feet at row 110), who stands in front of
-    their middle in frames 3-5; person 1's keypoints in frames 2 and 6 give the regions the plan interpolates."""
+    their middle in frames 3-5; with the frame after those (keypoints_behind_after_frames), person 1's keypoints in
+    frames 2 and 7 give the regions the plan interpolates."""
     config = replace(load_ingest_config(), keypoints_behind_min_cover=0.25, keypoints_behind_max_frames=30,
-                     mask_depth_frames=2)
+                     keypoints_behind_after_frames=1, mask_depth_frames=2)
     frames = list(range(9))
     walker = _person("p0", 1, frames, np.stack([_upright(40.0 + 10 * f) for f in frames]))
     front = _person("p1", 2, frames, np.stack([_upright(100.0) for _ in frames]))
@@ -107,11 +119,11 @@ def test_the_plan_interpolates_the_region_of_the_person_behind_between_the_frame
         return labels
 
     plan = behind_plan([walker, front], labels_of, lambda points: points, config)
-    assert sorted(plan) == [3, 4, 5] and all(len(plan[f]) == 1 and plan[f][0][0] == 0 for f in plan)
+    assert sorted(plan) == [3, 4, 5, 6] and all(len(plan[f]) == 1 and plan[f][0][0] == 0 for f in plan)
     before = region_from_keypoints(walker.keypoints[2, :, :2], np.ones(17, bool), REGION_GROW)
-    after = region_from_keypoints(walker.keypoints[6, :, :2], np.ones(17, bool), REGION_GROW)
-    assert plan[4][0][1].centre == pytest.approx((before.centre + after.centre) / 2)
-    assert plan[3][0][1].centre == pytest.approx(before.centre + (after.centre - before.centre) / 4)
+    after = region_from_keypoints(walker.keypoints[7, :, :2], np.ones(17, bool), REGION_GROW)
+    assert plan[3][0][1].centre == pytest.approx(before.centre + (after.centre - before.centre) / 5)
+    assert plan[6][0][1].centre == pytest.approx(before.centre + (after.centre - before.centre) * 4 / 5)
 
 
 def test_a_person_in_front_is_not_planned_for() -> None:

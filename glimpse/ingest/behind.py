@@ -5,8 +5,9 @@ and legs for theirs, and their region, re-centred on those, drifts (the `crouch`
 25% too large while the walker passes behind the crouching person); the written keypoints' runs there see the
 wrong region, and the others are painted over by their masks of that moment. After tracking both ends of such a
 passage are known, and every mask is final. Each run of frames where a person is behind someone (:func:`covered`
-by a nearer person's mask; nearer: :func:`feet_rows`), at most ``keypoints_behind_max_frames`` long, between two
-frames where their hips and shoulders were written (:func:`behind_runs`), is looked at again: the region
+by a nearer person's mask; nearer: :func:`feet_rows`) with the ``keypoints_behind_after_frames`` after it (the
+region that followed them takes some frames to come back onto them), at most ``keypoints_behind_max_frames`` long,
+between two frames where their hips and shoulders were written (:func:`behind_runs`), is looked at again: the region
 interpolated between those two frames' (:func:`region_from_keypoints`), the others' final masks painted over as
 for the written keypoints, and the written keypoints' runs made there
 (:meth:`glimpse.ingest.tracker.Tracker.keypoints_behind`); joints on another person's pixels are written as not
@@ -73,15 +74,17 @@ def feet_rows(bottoms: dict[int, float], frame_id: int, window: int) -> float | 
     return float(np.median(rows)) if rows else None
 
 
-def behind_runs(frames: list[int], covered_frames: set[int], ends: set[int], max_frames: int
+def behind_runs(frames: list[int], covered_frames: set[int], ends: set[int], max_frames: int, after_frames: int = 0
                 ) -> list[tuple[int, int]]:
     """(first, last) frame ids of the runs to look at again: each run of consecutive ``frames`` (sorted ids) that are
-    in ``covered_frames`` or not in ``ends`` (frames with a region to start from: hips and shoulders written; a
-    frame without one next to covered frames, often found by a mask alone, is looked at too), holding at least
-    one covered frame, at most ``max_frames`` long, whose frames just before and just after are the person's and in
-    ``ends``."""
+    behind someone (in ``covered_frames``, or within ``after_frames`` after one of those: the region that followed
+    the person comes back onto them some frames after they come out from behind) or not in ``ends`` (frames with a
+    region to start from: hips and shoulders written; a frame without one next to covered frames, often found by a
+    mask alone, is looked at too), holding at least one frame behind someone, at most ``max_frames`` long, whose
+    frames just before and just after are the person's and in ``ends``."""
     present = set(frames)
-    candidates = {frame_id for frame_id in frames if frame_id in covered_frames or frame_id not in ends}
+    behind = covered_frames | {frame_id + step for frame_id in covered_frames for step in range(1, after_frames + 1)}
+    candidates = {frame_id for frame_id in frames if frame_id in behind or frame_id not in ends}
     runs = []
     start = None
     for frame_id in frames:
@@ -89,7 +92,7 @@ def behind_runs(frames: list[int], covered_frames: set[int], ends: set[int], max
             continue
         start = frame_id if start is None else start
         if frame_id + 1 not in candidates or frame_id + 1 not in present:
-            if (covered_frames & set(range(start, frame_id + 1)) and frame_id - start + 1 <= max_frames
+            if (behind & set(range(start, frame_id + 1)) and frame_id - start + 1 <= max_frames
                     and {start - 1, frame_id + 1} <= present & ends):
                 runs.append((start, frame_id))
             start = None
@@ -137,7 +140,8 @@ def behind_plan(people: list[PersonTrack], labels_of: Callable[[int], np.ndarray
             region = region_from_keypoints(to_tracking(person.keypoints[k, :, :2]), seen, REGION_GROW)
             if region is not None:
                 regions[frame_id] = region
-        for first, last in behind_runs(person.frames, behind[index], set(regions), config.keypoints_behind_max_frames):
+        for first, last in behind_runs(person.frames, behind[index], set(regions), config.keypoints_behind_max_frames,
+                                       config.keypoints_behind_after_frames):
             before, after = regions[first - 1], regions[last + 1]
             for frame_id in range(first, last + 1):
                 fraction = (frame_id - first + 1) / (last - first + 2)

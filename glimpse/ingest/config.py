@@ -106,6 +106,7 @@ class IngestConfig:
     keypoints_behind_again: bool
     keypoints_behind_min_cover: float
     keypoints_behind_max_frames: int
+    keypoints_behind_after_frames: int
     appearance_bins: int
     appearance_update: float
     appearance_update_max_overlap: float
