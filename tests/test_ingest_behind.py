@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from glimpse.ingest.behind import (HEAD_TOP_REACH, behind_plan, behind_runs, covered, feet_rows,
+from glimpse.ingest.behind import (HEAD_TOP_REACH, behind_plan, behind_runs, box_counts, covered, feet_rows,
                                    interpolated_region, region_from_keypoints, with_keypoints)
 from glimpse.ingest.blazepose import REGION_GROW
 from glimpse.ingest.config import load_ingest_config
@@ -58,8 +58,11 @@ def test_covered_counts_a_nearer_persons_pixels_inside_the_box_of_the_mask() -> 
     inside, outside = np.zeros(SIZE, bool), np.zeros(SIZE, bool)
     inside[60:100, 40:60] = True  # 400 px in the box (10 columns of it): 0.25 of mine
     outside[20:100, 100:140] = True
-    assert covered(mine, [inside], 0.25) and not covered(mine, [inside], 0.3)
-    assert not covered(mine, [outside], 0.01) and not covered(np.zeros(SIZE, bool), [inside], 0.0)
+    area, (in_box, out_of_box) = box_counts(mine, [inside, outside])
+    assert area == 1600 and in_box == 400 and out_of_box == 0
+    assert covered(area, [in_box], 0.25) and not covered(area, [in_box], 0.3)
+    assert not covered(area, [out_of_box], 0.01)
+    assert box_counts(np.zeros(SIZE, bool), [inside]) == (0, [0]) and not covered(0, [0], 0.0)
 
 
 def test_the_feet_row_is_a_median_over_the_window() -> None:

@@ -54,15 +54,21 @@ def interpolated_region(before: Region, after: Region, fraction: float) -> Regio
                   before.side + fraction * (after.side - before.side), float(before.angle + fraction * turn))
 
 
-def covered(mine: np.ndarray, nearer: list[np.ndarray], min_cover: float) -> bool:
-    """Whether a person whose mask is ``mine`` [H, W] bool is behind someone: the box of their mask holds, of one
-    of the ``nearer`` people's masks, at least ``min_cover`` times their own mask's area."""
+def box_counts(mine: np.ndarray, others: list[np.ndarray]) -> tuple[int, list[int]]:
+    """(the area of ``mine`` [H, W] bool, per mask of ``others`` how many of its pixels lie in the box of ``mine``):
+    what :func:`covered` decides on. (0, zeros) for an empty ``mine``."""
     if not mine.any():
-        return False
+        return 0, [0] * len(others)
     rows, columns = np.nonzero(mine.any(1))[0], np.nonzero(mine.any(0))[0]
     inside = (slice(rows[0], rows[-1] + 1), slice(columns[0], columns[-1] + 1))
-    area = int(mine.sum())
-    return any(int(theirs[inside].sum()) >= min_cover * area for theirs in nearer)
+    return int(mine.sum()), [int(theirs[inside].sum()) for theirs in others]
+
+
+def covered(area: int, nearer_in_box: list[int], min_cover: float) -> bool:
+    """Whether a person whose mask has ``area`` pixels is behind someone: the box of their mask holds, of one of the
+    nearer people's masks (``nearer_in_box``: their pixels there, :func:`box_counts`), at least ``min_cover`` times
+    that area. Never for an empty mask."""
+    return area > 0 and any(count >= min_cover * area for count in nearer_in_box)
 
 
 def feet_rows(bottoms: dict[int, float], frame_id: int, window: int) -> float | None:
@@ -112,24 +118,30 @@ def behind_plan(people: list[PersonTrack], labels_of: Callable[[int], np.ndarray
         for frame_id in person.frames:
             present.setdefault(frame_id, []).append(index)
     bottoms: list[dict[int, float]] = [{} for _ in people]
-    for frame_id, here in present.items():
+    in_box: dict[tuple[int, int], tuple[int, dict[int, int]]] = {}  # (index, frame id) -> box_counts, by other
+    for frame_id, here in present.items():  # each frame's labels read once: who is nearer needs the frames after
         labels = labels_of(frame_id)
+        masks = {index: labels == people[index].label for index in here}
         for index in here:
-            rows = np.nonzero((labels == people[index].label).any(1))[0]
+            rows = np.nonzero(masks[index].any(1))[0]
             if len(rows):
                 bottoms[index][frame_id] = float(rows[-1])
+            if len(here) > 1:
+                others = [other for other in here if other != index]
+                area, counts = box_counts(masks[index], [masks[other] for other in others])
+                in_box[index, frame_id] = area, dict(zip(others, counts))
     behind: list[set[int]] = [set() for _ in people]
     for frame_id, here in present.items():
         if len(here) < 2:
             continue
-        labels = labels_of(frame_id)
         feet = {index: feet_rows(bottoms[index], frame_id, config.mask_depth_frames) for index in here}
         for index in here:
             if feet[index] is None:
                 continue
-            nearer = [labels == people[other].label for other in here
+            area, counts = in_box[index, frame_id]
+            nearer = [counts[other] for other in here
                       if other != index and feet[other] is not None and feet[other] > feet[index]]
-            if nearer and covered(labels == people[index].label, nearer, config.keypoints_behind_min_cover):
+            if nearer and covered(area, nearer, config.keypoints_behind_min_cover):
                 behind[index].add(frame_id)
     plan: dict[int, list[tuple[int, Region]]] = {}
     for index, person in enumerate(people):
