@@ -51,8 +51,9 @@ from glimpse.ingest.crop import Region
 from glimpse.ingest.evaluate import (HALF_VISIBLE, FoundPerson, TruePerson, in_front_of_own_body, mask_iou, pck,
                                      score_people)
 from glimpse.ingest.mask_snap import snapped_masks
+from glimpse.ingest.sides import consistent_sides
 from glimpse.ingest.smoothing import smooth_keypoints
-from glimpse.ingest.stage import blazepose_folder, consistent_sides, ingest, user_pose
+from glimpse.ingest.stage import blazepose_folder, ingest, user_pose
 from glimpse.ingest.tracker import Tracker, recorded_keypoints
 from glimpse.io.images import frame_files, read_mask, read_rgb
 from glimpse.io.video import write_mp4

@@ -9,11 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from glimpse.ingest.behind import (HEAD_TOP_REACH, behind_plan, behind_runs, box_counts, covered, feet_rows,
-                                   interpolated_region, region_from_keypoints, with_keypoints)
+from glimpse.ingest.behind import (HEAD_TOP_REACH, behind_plan, behind_runs, box_counts, covered, interpolated_region,
+                                   region_from_keypoints, with_keypoints)
 from glimpse.ingest.blazepose import REGION_GROW
 from glimpse.ingest.config import load_ingest_config
 from glimpse.ingest.crop import Region
+from glimpse.ingest.occlusion import feet_rows
 from glimpse.ingest.report import PersonTrack
 from glimpse.ingest.tracker import Tracker
 

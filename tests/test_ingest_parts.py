@@ -884,6 +884,33 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     assert (people[0].relative3d[:, 3, 3] == 0).all()
 
 
+
+def test_only_someone_nearer_hides_a_joint() -> None:
+    from glimpse.ingest.occlusion import hidden_joints, joints_on_others, lowest_rows
+
+    labels = np.zeros((60, 80), np.uint16)
+    labels[5:30, 10:30] = 2  # a person farther away (feet at row 29)
+    labels[20:55, 25:45] = 1  # a person nearer (feet at row 54), in front of the other where they overlap
+    labels[40:50, 60:70] = 3  # someone no track holds (a mask from the plate, say)
+    assert lowest_rows(labels) == {1: 54.0, 2: 29.0, 3: 49.0}
+    near = np.array([[15.0, 10.0], [35.0, 40.0], [65.0, 45.0]])  # on the farther one, its own pixels, on label 3
+    far = np.array([[35.0, 25.0], [15.0, 10.0], [0.0, 0.0]])  # on the nearer one, its own pixels, nobody's
+    assert joints_on_others(near, labels, 1, farther=[2]).tolist() == [False, False, True]
+    assert joints_on_others(near, labels, 1).tolist() == [True, False, True]
+
+    reads = []
+
+    def labels_of(frame_id: int) -> np.ndarray:
+        reads.append(frame_id)
+        return labels
+
+    frames = [0, 1, 2]
+    hidden = hidden_joints([(1, frames, np.stack([near] * 3)), (2, frames[:2], np.stack([far] * 2))], labels_of, 1)
+    assert hidden[0].tolist() == [[False, False, True]] * 3  # the farther one's pixels under its joint: kept
+    assert hidden[1].tolist() == [[True, False, False]] * 2  # behind the nearer one
+    assert sorted(reads) == [0, 0, 1, 1, 2, 2]  # each frame's labels read twice, whatever the number of people
+
+
 def test_keypoints_outside_the_image_or_below_the_confidence_are_recorded_as_missing() -> None:
     from glimpse.ingest.tracker import recorded_keypoints
 

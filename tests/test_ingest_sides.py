@@ -163,7 +163,7 @@ def test_exchanging_legs_swaps_knees_and_ankles_only_in_the_frames_given() -> No
 
 def test_a_track_is_made_consistent_by_both_passes_and_its_legs_only_on_a_static_camera() -> None:
     from glimpse.ingest.config import load_ingest_config
-    from glimpse.ingest.stage import consistent_sides
+    from glimpse.ingest.sides import consistent_sides
 
     config = load_ingest_config()
     keypoints, wrong = _side_on_walker(30)

@@ -5,13 +5,13 @@ and legs for theirs, and their region, re-centred on those, drifts (the `crouch`
 25% too large while the walker passes behind the crouching person); the written keypoints' runs there see the
 wrong region, and the others are painted over by their masks of that moment. After tracking both ends of such a
 passage are known, and every mask is final. Each run of frames where a person is behind someone (:func:`covered`
-by a nearer person's mask; nearer: :func:`feet_rows`) with the ``keypoints_behind_after_frames`` after it (the
-region that followed them takes some frames to come back onto them), at most ``keypoints_behind_max_frames`` long,
-between two frames where their hips and shoulders were written (:func:`behind_runs`), is looked at again: the region
-interpolated between those two frames' (:func:`region_from_keypoints`), the others' final masks painted over as
-for the written keypoints, and the written keypoints' runs made there
-(:meth:`glimpse.ingest.tracker.Tracker.keypoints_behind`); joints on another person's pixels are written as not
-seen, as everywhere.
+by a nearer person's mask; nearer: glimpse.ingest.occlusion.feet_rows) with the ``keypoints_behind_after_frames``
+after it (the region that followed them takes some frames to come back onto them), at most
+``keypoints_behind_max_frames`` long, between two frames where their hips and shoulders were written
+(:func:`behind_runs`), is looked at again: the region interpolated between those two frames'
+(:func:`region_from_keypoints`), the others' final masks painted over as for the written keypoints, and the written
+keypoints' runs made there (:meth:`glimpse.ingest.tracker.Tracker.keypoints_behind`); joints on anyone else's pixels
+are written as not seen (in those frames the person is behind someone).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 from glimpse.ingest.blazepose import REGION_GROW
 from glimpse.ingest.config import IngestConfig
 from glimpse.ingest.crop import Region, region_from_alignment
+from glimpse.ingest.occlusion import feet_rows
 from glimpse.ingest.report import PersonTrack
 from glimpse.ingest.sides import HIPS, SHOULDERS
 
@@ -71,15 +72,6 @@ def covered(area: int, nearer_in_box: list[int], min_cover: float) -> bool:
     return area > 0 and any(count >= min_cover * area for count in nearer_in_box)
 
 
-def feet_rows(bottoms: dict[int, float], frame_id: int, window: int) -> float | None:
-    """The median of a person's lowest mask rows (frame id -> row) over ``window`` frames either side of
-    ``frame_id``, None when none is known: who stands nearer on one floor (their feet lower in the image), as the
-    depth-ordered masks rank people, over a window (a hidden person's mask can reach down over the front person's
-    legs for a few frames)."""
-    rows = [bottoms[frame] for frame in range(frame_id - window, frame_id + window + 1) if frame in bottoms]
-    return float(np.median(rows)) if rows else None
-
-
 def behind_runs(frames: list[int], covered_frames: set[int], ends: set[int], max_frames: int, after_frames: int = 0
                 ) -> list[tuple[int, int]]:
     """(first, last) frame ids of the runs to look at again: each run of consecutive ``frames`` (sorted ids) that are
@@ -110,9 +102,10 @@ def behind_plan(people: list[PersonTrack], labels_of: Callable[[int], np.ndarray
                 ) -> dict[int, list[tuple[int, Region]]]:
     """Frame id -> [(index into ``people``, region at the tracking size)]: the frames of each person's runs behind
     someone (:func:`behind_runs`; behind: :func:`covered` by the masks of the people whose feet are lower,
-    :func:`feet_rows` over ``mask_depth_frames``) and the region interpolated there between the run's two ends
-    (:func:`region_from_keypoints` of the person's written keypoints, scene pixels, taken to the tracking size by
-    ``to_tracking``). ``labels_of(frame id)``: the final tracking-size labels (each person's ``label``)."""
+    glimpse.ingest.occlusion.feet_rows over ``mask_depth_frames``) and the region interpolated there between the
+    run's two ends (:func:`region_from_keypoints` of the person's written keypoints, scene pixels, taken to the
+    tracking size by ``to_tracking``). ``labels_of(frame id)``: the final tracking-size labels (each person's
+    ``label``)."""
     present: dict[int, list[int]] = {}
     for index, person in enumerate(people):
         for frame_id in person.frames:

@@ -43,6 +43,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from glimpse.ingest.config import IngestConfig
+
+LEGS_WINDOW_MAX_FRAMES = 10  # the legs' pass keeps 2^window histories per frame: 1024 at most
+
 # COCO-17 left/right pairs: eyes, ears, shoulders, elbows, wrists, hips, knees, ankles
 COCO17_SIDE_PAIRS = ((1, 2), (3, 4), (5, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16))
 COCO17_LEG_PAIRS = ((13, 14), (15, 16))  # knees, ankles
@@ -203,3 +207,23 @@ def mirrored_3d(relative3d: np.ndarray) -> np.ndarray:
     across = sum(points[:, left] - points[:, right] for left, right in (SHOULDERS, HIPS))
     normal = np.cross(across, up)
     return complete & (np.einsum("ti,ti->t", normal, points[:, COCO17_NOSE] - shoulders) < 0)
+
+
+def consistent_sides(frames: np.ndarray, keypoints: np.ndarray, relative3d: np.ndarray, legs_disputed: np.ndarray,
+                     static: bool, fps: float, config: IngestConfig
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One track's frames [T] (increasing ids at ``fps``), keypoints [T, 17, 3], relative3d [T, 17, 4] and legs'
+    disputes [T] -> (keypoints, relative3d, [T] bool frames whose left and right were exchanged, [T] bool frames
+    whose legs were): left and right kept consistent along the track (``sides_consistent``), and on a ``static``
+    camera the legs' names decided by a planted foot over ``legs_planted_window_s`` (``legs_consistent``)."""
+    exchange = np.zeros(len(frames), bool)
+    if config.sides_consistent:
+        exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
+        keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
+    legs = np.zeros(len(frames), bool)
+    if config.legs_consistent and static:
+        window = int(np.clip(round(config.legs_planted_window_s * fps), 1, LEGS_WINDOW_MAX_FRAMES))
+        legs = legs_to_exchange(frames, keypoints, legs_disputed, config.legs_keep_weight, config.legs_dispute_share,
+                                window, config.legs_planted_discount)
+        keypoints, relative3d = exchange_legs(keypoints, relative3d, legs)
+    return keypoints, relative3d, exchange, legs

@@ -56,13 +56,13 @@ from glimpse.ingest.report import (
     report_table,
     tracks_report,
 )
-from glimpse.ingest.sides import exchange_legs, exchange_sides, legs_to_exchange, sides_to_exchange
+from glimpse.ingest.sides import consistent_sides
 from glimpse.ingest.smoothing import smooth_keypoints
 from glimpse.ingest.survey import Survey, intrinsics_from_focal, survey_video
 from glimpse.ingest.depth_order import depth_ordered_labels
 from glimpse.ingest.gap_masks import (Sighting, gap_frames, gap_mask, interpolated_box, kept_only, mask_box,
                                       mean_colours, people_free_plate, sightings_in, taken_back, with_mask_frames)
-from glimpse.ingest.occlusion import joints_on_others
+from glimpse.ingest.occlusion import hidden_joints
 from glimpse.ingest.mask_snap import snapped_masks
 from glimpse.ingest.observation import Track
 from glimpse.ingest.tracker import Tracker
@@ -79,7 +79,6 @@ log = logging.getLogger("glimpse")
 SCENE_MASK_COVERAGE = 0.5  # a scene pixel is a person's when the person covers more than half of it
 WORK_SUFFIX = ".ingest-work"  # SCENE_DIR + this: labels and checkpoints of an unfinished ingest
 CHECKPOINT_FILE = "checkpoint.npz"
-LEGS_WINDOW_MAX_FRAMES = 10  # the legs' pass keeps 2^window histories per frame: 1024 at most
 
 
 def blazepose_folder(config: IngestConfig) -> Path:
@@ -139,36 +138,16 @@ def _to_tracking_pixels(points: np.ndarray, survey: Survey) -> np.ndarray:
     return (points + 0.5) * ratio - 0.5
 
 
-def consistent_sides(frames: np.ndarray, keypoints: np.ndarray, relative3d: np.ndarray, legs_disputed: np.ndarray,
-                     static: bool, fps: float, config: IngestConfig
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One track's frames [T] (increasing ids at ``fps``), keypoints [T, 17, 3], relative3d [T, 17, 4] and legs'
-    disputes [T] -> (keypoints, relative3d, [T] bool frames whose left and right were exchanged, [T] bool frames
-    whose legs were): left and right kept consistent along the track (``sides_consistent``), and on a ``static``
-    camera the legs' names decided by a planted foot over ``legs_planted_window_s`` (``legs_consistent``;
-    glimpse.ingest.sides)."""
-    exchange = np.zeros(len(frames), bool)
-    if config.sides_consistent:
-        exchange = sides_to_exchange(keypoints, config.sides_keep_weight)
-        keypoints, relative3d = exchange_sides(keypoints, relative3d, exchange)
-    legs = np.zeros(len(frames), bool)
-    if config.legs_consistent and static:
-        window = int(np.clip(round(config.legs_planted_window_s * fps), 1, LEGS_WINDOW_MAX_FRAMES))
-        legs = legs_to_exchange(frames, keypoints, legs_disputed, config.legs_keep_weight, config.legs_dispute_share,
-                                window, config.legs_planted_discount)
-        keypoints, relative3d = exchange_legs(keypoints, relative3d, legs)
-    return keypoints, relative3d, exchange, legs
-
-
 def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                  labels_of: Callable[[int], np.ndarray]) -> tuple[list[PersonTrack], dict]:
     """Tracks seen in at least ``track_min_frames`` frames (not counting frames looked at again) whose box is usually
     (median over their frames) at least ``track_min_height`` of the frame's height and upside down in at most
     ``track_max_upside_down`` of the frames showing their torso (glimpse.ingest.upright), named p0, p1, ... in order of
     first appearance, their keypoints' left and right (and their legs', on a static camera) made consistent along
-    the track (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on another person's pixels
-    of ``labels_of(frame id)``, the tracking-size labels) written as not seen, smoothed over time and, with their
-    boxes, in scene pixels; and how many tracks were dropped, by reason."""
+    the track (glimpse.ingest.sides), squeezed frames and joints hidden behind others (on the pixels of someone
+    nearer in ``labels_of(frame id)``, the tracking-size labels: glimpse.ingest.occlusion.hidden_joints) written as
+    not seen, smoothed over time and, with their boxes, in scene pixels; and how many tracks were dropped, by
+    reason."""
     long_enough = [t for t in tracks if len(t.frames) - len(t.looked_again) >= config.track_min_frames]
     large_enough = [t for t in long_enough if _median_height(t) >= config.track_min_height * survey.track_height]
     kept = sorted((t for t in large_enough
@@ -176,27 +155,19 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                   key=lambda t: (t.frames[0], t.index))
     dropped = {"short": len(tracks) - len(long_enough), "small": len(long_enough) - len(large_enough),
                "upside_down": len(large_enough) - len(kept)}
+    named = [_sides_and_border(track, survey, config) for track in kept]
+    if config.hide_joints_on_others:
+        hidden = hidden_joints([(track.index + 1, track.frames, keypoints) for track, (keypoints, *_) in
+                                zip(kept, named)], labels_of, config.mask_depth_frames)
+        for (keypoints, relative3d, *_), behind in zip(named, hidden):
+            keypoints[..., 2][behind] = 0.0
+            relative3d[..., 3][behind] = 0.0
     people = []
-    for k, track in enumerate(kept):
-        frames, track_boxes = np.array(track.frames), np.stack(track.boxes)  # boxes at the tracking size
-        keypoints, relative3d, exchange, legs = consistent_sides(
-            frames, np.stack(track.keypoints), np.stack(track.relative3d), np.array(track.legs_disputed),
-            survey.static, survey.fps, config)
-        squeezed = np.zeros(len(track.frames), bool)
-        if config.border_squeeze_max > 0:
-            squeezed = squeezed_at_border(frames / survey.fps, keypoints, track_boxes,
-                                          (survey.track_width, survey.track_height), config.border_squeeze_margin,
-                                          config.border_squeeze_window_s, config.border_squeeze_max)
-            keypoints[squeezed, :, 2] = 0.0
-            relative3d[squeezed, :, 3] = 0.0
-        if config.hide_joints_on_others:
-            hidden = np.stack([joints_on_others(points[:, :2], labels_of(frame_id), track.index + 1)
-                               for frame_id, points in zip(track.frames, keypoints)])
-            keypoints[..., 2][hidden] = 0.0
-            relative3d[..., 3][hidden] = 0.0
+    for k, (track, (keypoints, relative3d, exchange, squeezed, legs)) in enumerate(zip(kept, named)):
+        frames = np.array(track.frames)
         keypoints = smooth_keypoints(frames, keypoints, config.keypoint_smoothing_frames)
         keypoints = _keypoints_to_scene_pixels(keypoints, survey)
-        boxes = _to_scene_pixels(track_boxes.reshape(-1, 2, 2), survey).reshape(-1, 4)
+        boxes = _to_scene_pixels(np.stack(track.boxes).reshape(-1, 2, 2), survey).reshape(-1, 4)
         relative3d = smooth_keypoints(frames, relative3d, config.keypoint_smoothing_frames)
         people.append(PersonTrack(f"p{k}", track.index + 1, list(track.frames), keypoints, relative3d, boxes,
                                   list(track.reidentified), list(track.jumps),
@@ -204,6 +175,26 @@ def _kept_people(tracks: list[Track], survey: Survey, config: IngestConfig,
                                   [f for f, e in zip(track.frames, squeezed) if e],
                                   [f for f, e in zip(track.frames, legs) if e], sorted(track.looked_again)))
     return people, dropped
+
+
+def _sides_and_border(track: Track, survey: Survey, config: IngestConfig
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A track's (keypoints [T, 17, 3], relative3d [T, 17, 4], [T] bool frames whose sides were exchanged,
+    [T] bool frames squeezed at the border, [T] bool frames whose legs were exchanged), at the tracking size: left
+    and right (and the legs) made consistent (:func:`consistent_sides`), squeezed frames (glimpse.ingest.truncation)
+    written as not seen."""
+    frames = np.array(track.frames)
+    keypoints, relative3d, exchange, legs = consistent_sides(
+        frames, np.stack(track.keypoints), np.stack(track.relative3d), np.array(track.legs_disputed),
+        survey.static, survey.fps, config)
+    squeezed = np.zeros(len(track.frames), bool)
+    if config.border_squeeze_max > 0:
+        squeezed = squeezed_at_border(frames / survey.fps, keypoints, np.stack(track.boxes),
+                                      (survey.track_width, survey.track_height), config.border_squeeze_margin,
+                                      config.border_squeeze_window_s, config.border_squeeze_max)
+        keypoints[squeezed, :, 2] = 0.0
+        relative3d[squeezed, :, 3] = 0.0
+    return keypoints, relative3d, exchange, squeezed, legs
 
 
 def _masks_in_gaps(video: Path, survey: Survey, config: IngestConfig, people: list[PersonTrack],
