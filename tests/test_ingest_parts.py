@@ -884,7 +884,6 @@ def test_joints_on_another_persons_pixels_are_written_as_not_seen() -> None:
     assert (people[0].relative3d[:, 3, 3] == 0).all()
 
 
-
 def test_only_someone_nearer_hides_a_joint() -> None:
     from glimpse.ingest.occlusion import hidden_joints, joints_on_others, lowest_rows
 
